@@ -1,0 +1,58 @@
+# dqn_mine — targets a newcomer guesses. Everything runs inside a local virtualenv ($(VENV)).
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+# The CPU wheel of this torch lies on the dev/CI disk; on a GPU machine the same pin pulls the CUDA build.
+TORCH  ?= torch==2.13.0
+PYTEST_ARGS ?=
+
+.PHONY: install test test-fast lint train bench clean
+
+install: $(VENV)/.installed
+
+$(VENV)/.installed: setup.cfg setup.py
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q "$(TORCH)"
+	$(PY) -m pip install -q -e ".[test]"
+	touch $@
+
+test: install
+	$(PY) -m pytest $(PYTEST_ARGS)
+
+test-fast: install
+	$(PY) -m pytest -m "not slow" $(PYTEST_ARGS)
+
+lint: install
+	$(PY) -m pip install -q ruff
+	$(VENV)/bin/ruff check --select E,F,W --line-length 100 dqn_mine tests experiments
+
+train: install
+	$(PY) -m dqn_mine.train --preset smoke
+
+bench: install
+	$(PY) -m pip install -q -e ".[bench]"
+	$(PY) -m dqn_mine.bench --out results/bench.md
+
+clean:
+	rm -rf $(VENV) *.egg-info .pytest_cache
+
+# -- experiments (experiments/grids/<GRID>.py; see `python -m experiments list`) ------------------
+# SCALE=paper (the study's settings) | quick (about an hour on 2 CPU cores) | smoke (minutes).
+# SEEDS=N runs seeds 0..N-1 (default: the grid's for the scale); JOBS=J runs at a time (never more
+# busy processes than cores). Re-running the same command skips finished runs and resumes
+# interrupted ones. Output: $(OUT)summary.csv, report.md and PNG plots.
+GRID  ?= ablation
+SCALE ?= paper
+SEEDS ?=
+JOBS  ?= 1
+OUT   ?= results/$(GRID)/
+
+.PHONY: sweep ablation
+
+sweep: install
+	$(PY) -m pip install -q -e ".[plot]"
+	$(PY) -m experiments run $(GRID) --scale $(SCALE) --out $(OUT) --jobs $(JOBS) \
+		$(if $(SEEDS),--seeds $(SEEDS))
+
+ablation:
+	$(MAKE) sweep GRID=ablation

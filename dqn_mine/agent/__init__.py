@@ -1,0 +1,1 @@
+"""The agent: the dueling Q-network (`network`) and the learning maths (`learning`)."""

@@ -1,0 +1,185 @@
+"""The learning maths of SPEC section 4: n-step double-DQN targets, the IS-weighted Huber loss, the
+epsilon-greedy policy and one Adam update (:class:`DQNUpdater`). Pure functions of tensors: the
+processes around them (actors, learner loop) live in ``dqn_mine.system``.
+
+A batch carries a per-sample ``discount``: gamma**k when the n-step window ended after k steps
+without termination (k = n, or fewer when the episode was truncated: a time limit still
+bootstraps), and 0 when the episode terminated inside the window (nothing to bootstrap from).
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Dict, NamedTuple, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+
+class TensorBatch(NamedTuple):
+    """A replay batch on the learner's device (field meanings as in the replay's ``Batch``).
+
+    ``indices`` stays a numpy array on the host: it is only used to send priorities back.
+    """
+
+    obs: torch.Tensor            # uint8 [B, 3f, 44, 76]
+    history: torch.Tensor        # int8 [B, h], -1 = no action yet
+    carrying: torch.Tensor       # float32 [B]
+    action: torch.Tensor         # int64 [B]
+    ret: torch.Tensor            # float32 [B], discounted n-step return
+    discount: torch.Tensor       # float32 [B], gamma**k, 0 after termination
+    next_obs: torch.Tensor       # uint8 [B, 3f, 44, 76]
+    next_history: torch.Tensor   # int8 [B, h]
+    next_carrying: torch.Tensor  # float32 [B]
+    weights: torch.Tensor        # float32 [B], importance-sampling weights (max 1)
+    indices: np.ndarray          # int64 [B], replay slots (host side)
+
+
+def batch_to_device(batch, device: Union[str, torch.device]) -> TensorBatch:
+    """Numpy batch (any NamedTuple with TensorBatch's fields) -> TensorBatch on ``device``.
+
+    On CPU the tensors share memory with the numpy arrays (no copy). On CUDA they go through pinned
+    memory with ``non_blocking=True``, so a background sampling thread can queue the copy and the
+    learner's stream orders it before first use.
+    """
+    device = torch.device(device)
+    fields = {}
+    for name in TensorBatch._fields:
+        value = getattr(batch, name)
+        if name == "indices":
+            fields[name] = np.asarray(value)
+            continue
+        tensor = torch.as_tensor(np.ascontiguousarray(value))
+        if device.type == "cuda":
+            tensor = tensor.pin_memory().to(device, non_blocking=True)
+        fields[name] = tensor.to(device)
+    return TensorBatch(**fields)
+
+
+# -- targets and loss --------------------------------------------------------------------------
+
+def nstep_return(rewards: Sequence[float], gamma: float,
+                 terminated_at: Optional[int] = None) -> Tuple[float, float]:
+    """Reference n-step return and bootstrap discount of one window (for tests and writers).
+
+    ``rewards`` are the k <= n rewards that followed the start state (k < n when the episode was
+    truncated). ``terminated_at`` is the index of the reward whose step terminated the episode:
+    later rewards are ignored and the discount is 0. Otherwise the discount is gamma**k.
+    """
+    if terminated_at is not None:
+        rewards = rewards[:terminated_at + 1]
+    ret = sum(gamma ** k * float(r) for k, r in enumerate(rewards))
+    discount = 0.0 if terminated_at is not None else gamma ** len(rewards)
+    return ret, discount
+
+
+def q_of(net: nn.Module, batch: TensorBatch, next_state: bool = False) -> torch.Tensor:
+    """Q-values [B, A] of the start states (or of the n-th next states)."""
+    if next_state:
+        return net(batch.next_obs, batch.next_history, batch.next_carrying)
+    return net(batch.obs, batch.history, batch.carrying)
+
+
+@torch.no_grad()
+def double_dqn_target(online: nn.Module, target: nn.Module, batch: TensorBatch) -> torch.Tensor:
+    """ret + discount * Q_target(s', argmax_a Q_online(s', a)) -> [B]."""
+    best = q_of(online, batch, next_state=True).argmax(dim=1, keepdim=True)  # [B, 1]
+    bootstrap = q_of(target, batch, next_state=True).gather(1, best).squeeze(1)  # [B]
+    return batch.ret + batch.discount * bootstrap  # [B]
+
+
+def td_loss(online: nn.Module, target: nn.Module,
+            batch: TensorBatch) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """IS-weighted Huber loss -> (loss scalar, |TD error| [B] detached, Q(s, a) [B] detached)."""
+    y = double_dqn_target(online, target, batch)  # [B]
+    q_taken = q_of(online, batch).gather(1, batch.action.long().unsqueeze(1)).squeeze(1)  # [B]
+    per_sample = F.smooth_l1_loss(q_taken, y, reduction="none")  # [B]
+    loss = (batch.weights * per_sample).mean()
+    return loss, (y - q_taken).detach().abs(), q_taken.detach()
+
+
+# -- exploration -------------------------------------------------------------------------------
+
+def epsilon_for_actor(i: int, n: int, base: float = 0.4, alpha: float = 7.0) -> float:
+    """Ape-X per-actor epsilon: base**(1 + alpha * i / (n - 1)); a single actor gets ``base``."""
+    if n <= 1:
+        return base
+    return base ** (1.0 + alpha * i / (n - 1))
+
+
+def epsilon_greedy(q_values, eps, rng: np.random.Generator) -> np.ndarray:
+    """Greedy actions of ``q_values`` [B, A], each replaced by a uniform one with prob. ``eps``.
+
+    ``eps`` is a scalar or one value per row; returns int64 [B].
+    """
+    q = q_values.detach().cpu().numpy() if isinstance(q_values, torch.Tensor) else \
+        np.asarray(q_values)
+    actions = q.argmax(axis=1).astype(np.int64)  # [B]
+    explore = rng.random(len(actions)) < np.asarray(eps)  # [B]
+    actions[explore] = rng.integers(0, q.shape[1], int(explore.sum()))
+    return actions
+
+
+# -- one learner update ------------------------------------------------------------------------
+
+class DQNUpdater:
+    """Online and target networks, Adam, target sync every ``target_update_interval`` updates.
+
+    ``max_grad_norm`` clips the global gradient norm (None or 0: no clipping). See
+    ``Config.max_grad_norm`` for the chosen default.
+    """
+
+    def __init__(self, net: nn.Module, lr: float = 3e-5, target_update_interval: int = 2500,
+                 device: Union[str, torch.device] = "cpu",
+                 max_grad_norm: Optional[float] = None):
+        self.device = torch.device(device)
+        self.online = net.to(self.device)
+        self.target = copy.deepcopy(self.online).requires_grad_(False)
+        self.optimizer = torch.optim.Adam(self.online.parameters(), lr=lr)
+        self.target_update_interval = target_update_interval
+        self.max_grad_norm = max_grad_norm
+        self.updates = 0
+
+    def update(self, batch) -> Dict[str, object]:
+        """One gradient step on ``batch`` (numpy ``Batch`` or :class:`TensorBatch`).
+
+        Returns ``loss``, ``mean_q``, ``sampled_reward`` (mean n-step return of the batch) as
+        floats, ``grad_norm`` (float, nan when not clipping) and ``td_abs`` (numpy float32 [B]) for
+        priority feedback. One device-to-host transfer per update.
+        """
+        if not isinstance(batch, TensorBatch):
+            batch = batch_to_device(batch, self.device)
+        loss, td_abs, q_taken = td_loss(self.online, self.target, batch)
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        grad_norm = torch.full((), float("nan"), device=self.device)
+        if self.max_grad_norm:
+            grad_norm = nn.utils.clip_grad_norm_(self.online.parameters(), self.max_grad_norm)
+        self.optimizer.step()
+        self.updates += 1
+        if self.updates % self.target_update_interval == 0:
+            self.sync_target()
+        stats = torch.stack([loss.detach(), q_taken.mean(), batch.ret.mean(),
+                             grad_norm.detach().float()])  # [4]
+        host = torch.cat([stats, td_abs.float()]).cpu().numpy()  # [4 + B], one transfer
+        return {"loss": float(host[0]), "mean_q": float(host[1]),
+                "sampled_reward": float(host[2]), "grad_norm": float(host[3]),
+                "td_abs": host[4:].astype(np.float32)}
+
+    def sync_target(self) -> None:
+        self.target.load_state_dict(self.online.state_dict())
+
+    def state_dict(self) -> dict:
+        """Everything a checkpoint needs to continue exactly: networks, optimiser, counters."""
+        return {"online": self.online.state_dict(), "target": self.target.state_dict(),
+                "optimizer": self.optimizer.state_dict(), "updates": self.updates}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.online.load_state_dict(state["online"])
+        self.target.load_state_dict(state["target"])
+        # torch's optimiser keeps (not copies) same-device state tensors: without a copy two
+        # updaters loaded from one dict would share their Adam moments.
+        self.optimizer.load_state_dict(copy.deepcopy(state["optimizer"]))
+        self.updates = int(state["updates"])

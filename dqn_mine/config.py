@@ -1,0 +1,404 @@
+"""The run configuration: one frozen dataclass, the command line generated from it, json I/O.
+
+Every field carries a one-line ``help`` that becomes its ``--flag`` help. Precedence of values:
+dataclass defaults < ``--preset NAME`` < flags given explicitly. With ``--resume RUN_DIR`` the base
+is that run's saved ``config.json`` instead (explicit flags still win, e.g. ``--updates`` to
+train longer). Every impossible setting raises :class:`ConfigError` with a one-line message.
+
+The defaults are the study's (SPEC section 6) on ``two-room``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import time
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Tuple
+
+try:  # the environment package owns the list of tasks once it exists
+    from dqn_mine.env import TASKS
+except ImportError:
+    TASKS = ("one-room", "two-room", "three-room", "rooms")
+
+PLACEMENTS = ("fixed", "any-room")
+DEVICES = ("auto", "cpu", "cuda")
+EPSILON_SCHEDULES = ("fixed", "apex")
+INIT_PRIORITIES = ("actor", "max")
+CURRICULA = ("none", "phases", "rooms")
+
+
+class ConfigError(ValueError):
+    """An impossible or unreadable configuration; the message is one line."""
+
+
+def _f(default, help: str, choices: Optional[tuple] = None):
+    meta = {"help": help}
+    if choices is not None:
+        meta["choices"] = choices
+    return field(default=default, metadata=meta)
+
+
+@dataclass(frozen=True)
+class Config:
+    """The whole configuration of one run (saved as ``config.json``; ``--help`` lists it)."""
+
+    # -- task --------------------------------------------------------------------------------
+    task: str = _f("two-room", "task to train on", TASKS)
+    num_rooms: int = _f(3, "number of rooms of the `rooms` task")
+    room_size: float = _f(16.0, "side length of a room in world units")
+    max_episode_steps: Optional[int] = _f(None, "episode step limit (none = the task's default)")
+    placement: str = _f("fixed", "where agent, kit and miner start (any-room = domain "
+                        "randomisation)", PLACEMENTS)
+    curriculum: str = _f("none", "curriculum: phases (three-room phases 6->1) or rooms (scheduled "
+                         "room counts)", CURRICULA)
+    curriculum_threshold: float = _f(0.6, "rolling mean return that advances a curriculum phase")
+    curriculum_window: int = _f(50, "episodes in the rolling mean that advances the curriculum")
+    rooms_schedule: Tuple[int, ...] = _f((3, 4, 5), "room counts of the rooms curriculum, each "
+                                         "for an equal share of the updates")
+    # -- actors ------------------------------------------------------------------------------
+    actors: int = _f(7, "number of actor processes")
+    envs_per_actor: int = _f(1, "environments per actor, stepped with one batched forward pass")
+    epsilon: float = _f(0.01, "exploration rate of every actor (fixed schedule)")
+    epsilon_schedule: str = _f("fixed", "fixed: every actor uses --epsilon; apex: actor i uses "
+                               "0.4**(1+7i/(N-1))", EPSILON_SCHEDULES)
+    prefill: int = _f(50_000, "environment steps per actor before the learner starts")
+    # -- learner -----------------------------------------------------------------------------
+    updates: int = _f(1_000_000, "network updates to train for")
+    lr: float = _f(3e-5, "Adam learning rate")
+    batch_size: int = _f(32, "transitions per update")
+    gamma: float = _f(0.99, "discount factor")
+    n_step: int = _f(6, "steps of the n-step return")
+    # The study does not state C or any clipping: both defaults are Ape-X's (Horgan et al. 2018).
+    # With Huber loss and IS weights <= 1, dLoss/dQ is bounded per sample, so a norm-40 clip
+    # rarely binds; it guards against rare spikes (e.g. right after a target sync) at no cost.
+    target_update_interval: int = _f(2500, "updates between target network syncs (Ape-X value)")
+    max_grad_norm: Optional[float] = _f(40.0, "clip the global gradient norm (none or 0 = off; "
+                                        "Ape-X value)")
+    publish_interval: int = _f(500, "updates between weight broadcasts to the actors")
+    replay_ratio: Optional[float] = _f(None, "hold updates per new transition fixed by "
+                                       "throttling (none = free-running)")
+    learner_queue: int = _f(4, "ready batches the background sampler keeps on the device")
+    learner_threads: int = _f(0, "torch threads of the learner (0 = cores the acting processes "
+                              "leave free, at least 1)")
+    device: str = _f("auto", "learner device (auto = cuda when available)", DEVICES)
+    # -- network -----------------------------------------------------------------------------
+    history_len: int = _f(20, "actions in the one-hot action history input (0 = none)")
+    frame_stack: int = _f(1, "frames stacked along channels (1 = no stacking)")
+    # -- replay ------------------------------------------------------------------------------
+    replay_capacity: int = _f(1_048_576, "transitions the replay holds (oldest overwritten)")
+    per: bool = _f(True, "prioritised replay (off = uniform sampling)")
+    zeta: float = _f(0.6, "priority exponent: P(i) ~ p_i**zeta")
+    beta0: float = _f(0.4, "initial importance-sampling exponent, annealed to 1")
+    eta: float = _f(1e-5, "added to |TD error| so no priority is zero")
+    init_priority: str = _f("actor", "priority of new transitions: actor (from the actor's "
+                            "network) or max (largest so far)", INIT_PRIORITIES)
+    # -- evaluation --------------------------------------------------------------------------
+    eval_every: int = _f(0, "evaluation actor: evaluate every N training env steps (0 = off)")
+    eval_episodes: int = _f(10, "episodes per evaluation")
+    eval_task: Optional[str] = _f(None, "task of the evaluation actor (none = --task, full "
+                                  "problem)")
+    eval_epsilon: float = _f(0.01, "exploration rate of the evaluation actor")
+    eval_video_every: int = _f(10, "save a GIF of one evaluation episode every N evaluations "
+                               "(0 = never)")
+    # -- run ---------------------------------------------------------------------------------
+    seed: int = _f(0, "random seed")
+    preset: str = _f("paper", "named configuration the flags start from")
+    run_dir: Optional[str] = _f(None, "run folder (none = runs/<task>__<preset>__<seed>__<time>)")
+    resume: Optional[str] = _f(None, "continue the run in this folder with its saved config")
+    checkpoint_interval: int = _f(50_000, "updates between checkpoints (one is always written "
+                                  "at the end)")
+    log_interval: int = _f(1000, "updates between rows of metrics.csv")
+    return_window: int = _f(100, "finished episodes in the rolling mean return and length")
+    serial: bool = _f(False, "run actors and learner in one process (tests, debugging)")
+    progress: bool = _f(True, "show the progress bar")
+
+    # -- checks ------------------------------------------------------------------------------
+    def validate(self) -> "Config":
+        """Raise :class:`ConfigError` (one line) for an impossible configuration; return self."""
+        for problem in _problems(self):
+            raise ConfigError(problem)
+        return self
+
+    def with_run_dir(self, now: Optional[float] = None) -> "Config":
+        """This config with ``run_dir`` filled in (``runs/<task>__<preset>__<seed>__<time>``)."""
+        if self.run_dir is not None:
+            return self
+        stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(now))
+        return dataclasses.replace(
+            self, run_dir=f"runs/{self.task}__{self.preset}__{self.seed}__{stamp}")
+
+    # -- json --------------------------------------------------------------------------------
+    def to_dict(self) -> Dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+    def to_json(self, path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+
+    @classmethod
+    def from_dict(cls, data: Dict[str, Any], where: str = "config") -> "Config":
+        if not isinstance(data, dict):
+            raise ConfigError(f"{where}: expected a json object")
+        hints = _hints()
+        unknown = sorted(set(data) - set(hints))
+        if unknown:
+            raise ConfigError(f"{where}: unknown settings {', '.join(unknown)}")
+        values = {}
+        for name, value in data.items():
+            if _is_tuple(hints[name]) and isinstance(value, list):
+                value = tuple(value)
+            if not _fits(value, hints[name]):
+                kind = getattr(hints[name], "__name__", str(hints[name]).replace("typing.", ""))
+                raise ConfigError(f"{where}: {name} = {value!r} is not {kind}")
+            values[name] = value
+        return cls(**values)
+
+    @classmethod
+    def from_json(cls, path) -> "Config":
+        """Load a saved config; a missing, unreadable or corrupt file raises ConfigError."""
+        path = Path(path)
+        try:
+            data = json.loads(path.read_text())
+        except FileNotFoundError:
+            raise ConfigError(f"no config file at {path}") from None
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise ConfigError(f"corrupt config file {path}: {str(exc).splitlines()[0]}") from None
+        return cls.from_dict(data, where=str(path))
+
+
+# Named starting points; explicit flags override them.
+PRESETS: Dict[str, Dict[str, Any]] = {
+    "paper": {},  # the study's configuration (SPEC section 6) on two-room
+    # Learns a small one-room on 2 CPU cores in minutes: high exploration from the Ape-X schedule
+    # (actor 0 at 0.4; a random network alone barely moves), a faster learning rate and target
+    # sync for the few updates there is time for, a small replay that fills quickly.
+    "smoke": {
+        "task": "one-room", "room_size": 8.0, "max_episode_steps": 200,
+        "actors": 2, "envs_per_actor": 1, "epsilon_schedule": "apex",
+        "prefill": 2000, "replay_capacity": 50_000, "updates": 20_000,
+        "lr": 2e-4, "target_update_interval": 500, "publish_interval": 100,
+        "checkpoint_interval": 5000, "log_interval": 250,
+    },
+}
+
+
+# -- validation --------------------------------------------------------------------------------
+
+def _problems(c: Config) -> List[str]:
+    """Every impossible setting, as one-line messages (first one is raised)."""
+    p = []
+    for name in ("task", "placement", "curriculum", "epsilon_schedule", "init_priority",
+                 "device"):
+        choices = _field(name).metadata["choices"]
+        if getattr(c, name) not in choices:
+            p.append(f"--{_flag(name)}: unknown value {getattr(c, name)!r} "
+                     f"(choose from {', '.join(choices)})")
+    if c.eval_task is not None and c.eval_task not in TASKS:
+        p.append(f"--eval-task: unknown task {c.eval_task!r} (choose from {', '.join(TASKS)})")
+    if c.preset not in PRESETS:
+        p.append(f"--preset: unknown preset {c.preset!r} (choose from {', '.join(PRESETS)})")
+    at_least = {"actors": 1, "envs_per_actor": 1, "n_step": 1, "batch_size": 1, "frame_stack": 1,
+                "history_len": 0, "prefill": 0, "updates": 0, "target_update_interval": 1,
+                "publish_interval": 1, "learner_queue": 1, "learner_threads": 0, "eval_every": 0,
+                "eval_video_every": 0,
+                "eval_episodes": 1, "checkpoint_interval": 1, "log_interval": 1,
+                "curriculum_window": 1, "return_window": 1, "seed": 0}
+    for name, low in at_least.items():
+        if getattr(c, name) < low:
+            p.append(f"--{_flag(name)} must be at least {low}, got {getattr(c, name)}")
+    streams = c.actors * c.envs_per_actor
+    if c.replay_capacity < c.batch_size:
+        p.append(f"--replay-capacity {c.replay_capacity} is smaller than --batch-size "
+                 f"{c.batch_size}")
+    elif streams >= 1 and c.replay_capacity // streams <= c.n_step + c.frame_stack:
+        p.append(f"--replay-capacity {c.replay_capacity} leaves each of the {streams} actor "
+                 f"environments fewer than n-step + frame-stack + 1 slots")
+    if not 0.0 < c.gamma <= 1.0:
+        p.append(f"--gamma must be in (0, 1], got {c.gamma}")
+    for name in ("epsilon", "eval_epsilon"):
+        if not 0.0 <= getattr(c, name) <= 1.0:
+            p.append(f"--{_flag(name)} must be in [0, 1], got {getattr(c, name)}")
+    if not c.lr > 0:
+        p.append(f"--lr must be positive, got {c.lr}")
+    if c.zeta < 0:
+        p.append(f"--zeta must be >= 0, got {c.zeta}")
+    if not 0.0 <= c.beta0 <= 1.0:
+        p.append(f"--beta0 must be in [0, 1], got {c.beta0}")
+    if not c.eta > 0:
+        p.append(f"--eta must be positive (a zero priority is never sampled again), got {c.eta}")
+    if c.max_grad_norm is not None and c.max_grad_norm < 0:
+        p.append(f"--max-grad-norm must be >= 0 (0 = off), got {c.max_grad_norm}")
+    if c.replay_ratio is not None and not c.replay_ratio > 0:
+        p.append(f"--replay-ratio must be positive, got {c.replay_ratio}")
+    if not c.room_size > 0:
+        p.append(f"--room-size must be positive, got {c.room_size}")
+    if c.max_episode_steps is not None and c.max_episode_steps < 1:
+        p.append(f"--max-episode-steps must be at least 1, got {c.max_episode_steps}")
+    if c.task == "rooms" and c.num_rooms < 2:
+        p.append(f"--num-rooms must be at least 2 for the rooms task, got {c.num_rooms}")
+    if c.curriculum == "phases" and c.task != "three-room":
+        p.append(f"--curriculum phases needs --task three-room, got {c.task}")
+    if c.curriculum == "rooms" and (c.task != "rooms" or not c.rooms_schedule
+                                    or min(c.rooms_schedule) < 2):
+        p.append("--curriculum rooms needs --task rooms and a --rooms-schedule of counts >= 2")
+    return p
+
+
+# -- command line ------------------------------------------------------------------------------
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line instead of usage + message + exit
+        raise ConfigError(message)
+
+
+def _hints() -> Dict[str, Any]:
+    return typing.get_type_hints(Config)
+
+
+def _field(name: str) -> dataclasses.Field:
+    return Config.__dataclass_fields__[name]
+
+
+def _flag(name: str) -> str:
+    return name.replace("_", "-")
+
+
+def _is_tuple(hint) -> bool:
+    return typing.get_origin(hint) in (tuple, Tuple)
+
+
+def _fits(value, hint) -> bool:
+    """Whether a json-loaded value has the type ``hint`` (ints pass for floats)."""
+    if value is None:
+        return type(None) in typing.get_args(hint)
+    args = [a for a in typing.get_args(hint) if a is not type(None)]
+    if _is_tuple(hint):
+        return isinstance(value, tuple) and all(_fits(v, args[0]) for v in value)
+    base = args[0] if typing.get_origin(hint) is typing.Union else hint
+    if base is float:
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    if base is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    return isinstance(value, base)
+
+
+def _scalar(hint):
+    """(converter, optional?) of a type hint."""
+    args = [a for a in typing.get_args(hint) if a is not type(None)]
+    optional = typing.get_origin(hint) is typing.Union and len(args) == 1
+    base = args[0] if optional else hint
+
+    def convert(text: str):
+        if optional and text.lower() == "none":
+            return None
+        return base(text)
+
+    convert.__name__ = base.__name__  # argparse names the type in its error messages
+    return convert
+
+
+def _show(value) -> str:
+    if value is None:
+        return "none"
+    if isinstance(value, tuple):
+        return " ".join(map(str, value))
+    return str(value)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``--flag`` per Config field; defaults are not filled in, so only explicit flags appear."""
+    parser = _Parser(prog="python -m dqn_mine.train",
+                     description="Train an Ape-X style DQN agent on the mine rescue task.",
+                     argument_default=argparse.SUPPRESS)
+    hints = _hints()
+    for f in dataclasses.fields(Config):
+        hint, meta = hints[f.name], f.metadata
+        helptext = f"{meta['help']} (default: {_show(f.default)})"
+        kwargs: Dict[str, Any] = {"help": helptext, "dest": f.name}
+        if hint is bool:
+            kwargs["action"] = argparse.BooleanOptionalAction
+        elif _is_tuple(hint):
+            kwargs.update(nargs="+", type=typing.get_args(hint)[0], metavar="N")
+        else:
+            kwargs["type"] = _scalar(hint)
+            kwargs["metavar"] = kwargs["type"].__name__.upper()
+        if "choices" in meta:
+            kwargs["choices"] = meta["choices"]
+            kwargs["metavar"] = "{" + ",".join(meta["choices"]) + "}"
+        if f.name == "preset":
+            kwargs["metavar"] = "{" + ",".join(PRESETS) + "}"
+        parser.add_argument(f"--{_flag(f.name)}", **kwargs)
+    return parser
+
+
+def parse_args(argv: Optional[List[str]] = None) -> Config:
+    """Command line -> validated Config (``run_dir`` still None unless given or resumed).
+
+    Raises ConfigError (one line) for bad flags, an unknown preset or a missing/corrupt resume.
+    """
+    explicit = vars(build_parser().parse_args(argv))
+    for name, hint in _hints().items():
+        if name in explicit and _is_tuple(hint):
+            explicit[name] = tuple(explicit[name])
+    if explicit.get("resume"):
+        try:
+            base = Config.from_json(Path(explicit["resume"]) / "config.json")
+        except ConfigError as exc:
+            raise ConfigError(f"--resume {explicit['resume']}: {exc}") from None
+        explicit = {k: v for k, v in explicit.items() if k != "preset"}
+        explicit["run_dir"] = explicit["resume"]
+    else:
+        preset = explicit.get("preset", _field("preset").default)
+        if preset not in PRESETS:
+            raise ConfigError(f"--preset: unknown preset {preset!r} "
+                              f"(choose from {', '.join(PRESETS)})")
+        base = Config(**{**PRESETS[preset], "preset": preset})
+    return dataclasses.replace(base, **explicit).validate()
+
+
+def learner_threads(cfg: Config, cores: Optional[int] = None) -> int:
+    """Torch threads for the learner: explicit, or the cores the acting processes leave free.
+
+    Measured (bench.learner): threads competing with busy actor processes for a core cost more
+    than they give, so the automatic choice never oversubscribes.
+    """
+    import os
+
+    if cfg.learner_threads:
+        return cfg.learner_threads
+    acting = cfg.actors + (1 if cfg.eval_every else 0)
+    return max(1, (cores or os.cpu_count() or 1) - acting)
+
+
+def resolve_device(name: str):
+    """``auto`` -> cuda when available, else cpu; an explicit ``cuda`` without CUDA is an error."""
+    import torch
+
+    if name == "auto":
+        name = "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cuda" and not torch.cuda.is_available():
+        raise ConfigError("--device cuda: no CUDA device is available (use --device cpu)")
+    if name not in ("cpu", "cuda"):
+        raise ConfigError(f"--device: unknown value {name!r} (choose from {', '.join(DEVICES)})")
+    return torch.device(name)
+
+
+def to_argv(cfg: Config) -> List[str]:
+    """Flags that :func:`parse_args` turns back into ``cfg`` (the preset plus what differs)."""
+    base = Config(**{**PRESETS.get(cfg.preset, {}), "preset": cfg.preset})
+    argv: List[str] = [] if cfg.preset == _field("preset").default else ["--preset", cfg.preset]
+    for f in dataclasses.fields(Config):
+        value = getattr(cfg, f.name)
+        if value == getattr(base, f.name):
+            continue
+        if isinstance(value, bool):
+            argv.append(f"--{'' if value else 'no-'}{_flag(f.name)}")
+        elif isinstance(value, tuple):
+            argv += [f"--{_flag(f.name)}", *map(str, value)]
+        else:
+            text = "none" if value is None else repr(value) if isinstance(value, float) else value
+            argv += [f"--{_flag(f.name)}", str(text)]
+    return argv

@@ -1,0 +1,336 @@
+"""The mine world: layout, entities, collision, the six actions and rendering.
+
+``MineEnv`` owns everything that is the same for every task (physics, actions, rendering, the
+builders that place rooms, entities and the agent). A task only decides where things start; see
+``dqn_mine/env/tasks.py`` and ``MineRescueEnv``.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from dqn_mine.env import mesh
+from dqn_mine.env.entities import BOULDER, KINDS, KIT, MINER, Entity
+from dqn_mine.env.layout import Door, Layout, generate_layout
+
+OBS_HEIGHT, OBS_WIDTH = 44, 76
+AGENT_RADIUS = 0.4
+FORWARD_STEP = 0.5
+HEADINGS = 40                      # 360 / 9 degrees: headings are exact table entries
+EYE_HEIGHT = 1.5
+FOV_Y = 60.0
+WALL_HEIGHT = 3.0
+DOOR_HEIGHT = 2.3
+DOOR_WIDTH = 2.4
+REACH_AHEAD = AGENT_RADIUS + 0.5   # centre of the disc in which action 4 finds an item ...
+REACH_RADIUS = 0.6                 # ... and its radius
+DROP_GAP = 0.1                     # space between the agent and an item it puts down
+DOOR_CLEARANCE = 2.5               # kit, miner and agent start at least this far from doorways
+ASIDE_CLEARANCE = 3.5              # boulders moved aside lie at least this far from doorways
+MIN_ROOM_SIZE = 8.0
+
+_COS = [math.cos(2 * math.pi * k / HEADINGS) for k in range(HEADINGS)]
+_SIN = [math.sin(2 * math.pi * k / HEADINGS) for k in range(HEADINGS)]
+
+FORWARD, BACKWARD, TURN_RIGHT, TURN_LEFT, INTERACT, NOOP = range(6)
+ACTION_NAMES = ("forward", "backward", "turn right", "turn left", "pick/drop/exchange/deliver", "no-op")
+
+
+class MineEnv(gym.Env):
+    """Base class of the mine tasks; subclasses implement ``_generate()``.
+
+    Headings are indices into 40 directions 9 degrees apart; heading k looks along
+    (cos, sin)(2 pi k / 40) in the x-z plane, and turning right increases k.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
+
+    def __init__(self, max_episode_steps: int, room_size: float = 16.0, render_mode: str | None = None):
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.render_mode = render_mode
+        self.room_size = float(room_size)
+        self.max_episode_steps = int(max_episode_steps)
+        self.observation_space = spaces.Box(0, 255, (3, OBS_HEIGHT, OBS_WIDTH), np.uint8)
+        self.action_space = spaces.Discrete(6)
+        self.layout: Layout | None = None
+        self.entities: list[Entity] = []   # everything in the world, the carried item included
+        self.carrying: Entity | None = None
+        self.agent_x = self.agent_z = 0.0
+        self.heading = 0
+        self.steps = 0
+        self._rng = random.Random(0)
+        self._scene = None
+        self._obstacles: list[tuple[float, float, float]] = []
+        self._walk: list[tuple[float, float, float, float]] = []
+        self._expert = None
+        self._last_obs = None
+        self.version = 0  # bumped whenever an entity moves (the expert caches plans by it)
+
+    # --- gymnasium API --------------------------------------------------------------------
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        # Python's Random draws scalars ~10x faster than numpy's Generator; seed it from np_random
+        # so that gymnasium's seeding rules (seed once, then continue the stream) still hold.
+        self._rng.seed(int(self.np_random.integers(2 ** 63)))
+        self.entities = []
+        self.carrying = None
+        self.steps = 0
+        self._expert = None
+        self._generate()
+        self._walk = self.layout.rects(AGENT_RADIUS)
+        self._entities_changed(static=True)
+        obs = self._observe()
+        info = {"carrying": self.carrying is not None, "carrying_kit": self._carrying_kit(),
+                "agent_room": self.agent_room, "kit_room": self.room_of(self.kit), "miner_room": self.room_of(self.miner),
+                "num_rooms": len(self.layout.rooms)}
+        return obs, info
+
+    def step(self, action):
+        if action.__class__ is not int:
+            action = _as_action(action)
+        elif not 0 <= action <= 5:
+            raise ValueError(f"action must be an integer in 0..5, got {action}")
+        terminated = False
+        if action == FORWARD:
+            self._move(FORWARD_STEP)
+        elif action == BACKWARD:
+            self._move(-FORWARD_STEP)
+        elif action == TURN_RIGHT:
+            self.heading = (self.heading + 1) % HEADINGS
+        elif action == TURN_LEFT:
+            self.heading = (self.heading - 1) % HEADINGS
+        elif action == INTERACT:
+            terminated = self._interact()
+        self.steps += 1
+        truncated = not terminated and self.steps >= self.max_episode_steps
+        carrying = self.carrying
+        info = {"carrying": carrying is not None, "carrying_kit": carrying is not None and carrying.kind == KIT}
+        return self._observe(), (1.0 if terminated else 0.0), terminated, truncated, info
+
+    def render(self):
+        """First-person view (upscaled 6x) and the top-down map side by side, uint8 (H, W, 3)."""
+        if self.render_mode != "rgb_array":
+            return None
+        first = self._last_obs.transpose(1, 2, 0).repeat(6, 0).repeat(6, 1)
+        side = first.shape[0]
+        top = self.render_top_down(side)
+        gap = np.full((side, 4, 3), 255, np.uint8)
+        return np.concatenate([first, gap, top], axis=1)
+
+    def render_top_down(self, size: int = 256) -> np.ndarray:
+        """A map of the whole mine for people (never for the agent): uint8 (size, size, 3)."""
+        from dqn_mine.env.topdown import draw_map
+
+        return draw_map(self, size)
+
+    def close(self):
+        if self._scene is not None:
+            self._scene.release()
+            self._scene = None
+
+    def expert_action(self) -> int:
+        """The next action of a scripted planner that uses privileged state (see expert.py)."""
+        if self._expert is None:
+            from dqn_mine.env.expert import Expert
+
+            self._expert = Expert(self)
+        return self._expert.act()
+
+    # --- state the expert, the map and tests read ------------------------------------------
+
+    @property
+    def direction(self) -> tuple[float, float]:
+        return _COS[self.heading], _SIN[self.heading]
+
+    @property
+    def kit(self) -> Entity:
+        return next(e for e in self.entities if e.kind == KIT)
+
+    @property
+    def miner(self) -> Entity:
+        return next(e for e in self.entities if e.kind == MINER)
+
+    @property
+    def agent_room(self) -> int:
+        return self.layout.room_at(self.agent_x, self.agent_z)
+
+    def room_of(self, entity: Entity) -> int:
+        if entity is self.carrying:
+            return self.agent_room
+        return self.layout.room_at(entity.x, entity.z)
+
+    def world_entities(self) -> list[Entity]:
+        """Entities lying in the world (everything but the carried item)."""
+        return [e for e in self.entities if e is not self.carrying]
+
+    def agent_fits(self, x: float, z: float) -> bool:
+        """True when the agent could stand at (x, z) without touching a wall or an entity."""
+        for x0, z0, x1, z1 in self._walk:
+            if x0 <= x <= x1 and z0 <= z <= z1:
+                break
+        else:
+            return False
+        for ex, ez, rr in self._obstacles:
+            dx, dz = x - ex, z - ez
+            if dx * dx + dz * dz < rr:
+                return False
+        return True
+
+    def item_fits(self, item: Entity, x: float, z: float, ignore: Entity | None = None) -> bool:
+        """True when ``item`` could lie at (x, z): no wall, no other entity, not on the agent."""
+        r = item.radius
+        if not self.layout.fits(x, z, r):
+            return False
+        if (x - self.agent_x) ** 2 + (z - self.agent_z) ** 2 < (r + AGENT_RADIUS) ** 2:
+            return False
+        for e in self.entities:
+            if e is not item and e is not ignore and e is not self.carrying:
+                if (x - e.x) ** 2 + (z - e.z) ** 2 < (r + e.radius) ** 2:
+                    return False
+        return True
+
+    def facing(self) -> Entity | None:
+        """The entity action 4 acts on: the nearest one in reach in front, not behind a wall."""
+        c, s = _COS[self.heading], _SIN[self.heading]
+        cx, cz = self.agent_x + REACH_AHEAD * c, self.agent_z + REACH_AHEAD * s
+        best, best_d = None, math.inf
+        for e in self.entities:
+            if e is self.carrying:
+                continue
+            d = (e.x - cx) ** 2 + (e.z - cz) ** 2
+            if d < (e.radius + REACH_RADIUS) ** 2 and d < best_d:
+                if not self.layout.crosses_wall(self.agent_x, self.agent_z, e.x, e.z):
+                    best, best_d = e, d
+        return best
+
+    # --- actions -----------------------------------------------------------------------------
+
+    def _move(self, dist: float) -> None:
+        x = self.agent_x + dist * _COS[self.heading]
+        z = self.agent_z + dist * _SIN[self.heading]
+        if self.agent_fits(x, z):
+            self.agent_x, self.agent_z = x, z
+
+    def _interact(self) -> bool:
+        """Deliver, pick up, exchange or drop; True on delivery."""
+        target = self.facing()
+        held = self.carrying
+        if held is not None and held.kind == KIT and target is not None and target.kind == MINER:
+            return True
+        if target is not None and target.movable:
+            if held is not None:  # exchange: the held item takes the target's place
+                if not self.item_fits(held, target.x, target.z, ignore=target):
+                    return False
+                held.x, held.z, held.yaw = target.x, target.z, target.yaw
+            self.carrying = target
+        elif held is not None:
+            c, s = _COS[self.heading], _SIN[self.heading]
+            ahead = AGENT_RADIUS + held.radius + DROP_GAP
+            x, z = self.agent_x + ahead * c, self.agent_z + ahead * s
+            if not self.item_fits(held, x, z) or self.layout.crosses_wall(self.agent_x, self.agent_z, x, z):
+                return False
+            held.x, held.z, held.yaw = x, z, 2 * math.pi * self.heading / HEADINGS
+            self.carrying = None
+        else:
+            return False
+        self._entities_changed()
+        return False
+
+    def _carrying_kit(self) -> bool:
+        return self.carrying is not None and self.carrying.kind == KIT
+
+    # --- rendering ----------------------------------------------------------------------------
+
+    def _entities_changed(self, static: bool = False) -> None:
+        """Refresh collision discs and the entity geometry after something moved."""
+        self.version += 1
+        world = self.world_entities()
+        self._obstacles = [(e.x, e.z, (AGENT_RADIUS + e.radius) ** 2) for e in world]
+        if self._scene is None:
+            from dqn_mine.env.render import Scene
+
+            far = 2.0 * self.room_size * (len(self.layout.rooms) + 1)
+            self._scene = Scene(OBS_WIDTH, OBS_HEIGHT, FOV_Y, EYE_HEIGHT, far)
+        dynamic = (np.concatenate([e.vertices() for e in world]) if world
+                   else np.zeros((0, mesh.VERTEX_FLOATS), np.float32))
+        if static:
+            self._scene.set_static(mesh.static_scene(self.layout, WALL_HEIGHT, DOOR_HEIGHT), dynamic)
+        else:
+            self._scene.set_dynamic(dynamic)
+
+    def _observe(self) -> np.ndarray:
+        obs = self._scene.render(self.agent_x, self.agent_z, _COS[self.heading], _SIN[self.heading])
+        self._last_obs = obs
+        return obs
+
+    # --- builders for tasks -------------------------------------------------------------------
+
+    def _generate(self) -> None:
+        raise NotImplementedError
+
+    def _build_layout(self, num_rooms: int, chain: bool) -> None:
+        self.layout = generate_layout(self._rng, num_rooms, self.room_size, DOOR_WIDTH, chain)
+
+    def _block_doorways(self) -> list[Entity]:
+        """A boulder in the middle of every doorway."""
+        boulders = []
+        for door in self.layout.doors:
+            x, z = door.center
+            boulders.append(self._add(Entity(BOULDER, x, z, self._rng.uniform(0, 2 * math.pi))))
+        return boulders
+
+    def _move_aside(self, boulder: Entity, door: Door) -> None:
+        """Put a doorway's boulder somewhere in one of the two rooms it joins, clear of doorways."""
+        room = self._rng.choice((door.a, door.b))
+        boulder.x, boulder.z = self._random_spot(boulder.radius, room, ASIDE_CLEARANCE, boulder)
+
+    def _place(self, kind: str, room: int) -> Entity:
+        """A new entity at a random free spot in ``room`` (place entities before the agent)."""
+        ent = Entity(kind, yaw=self._rng.uniform(0, 2 * math.pi))
+        ent.x, ent.z = self._random_spot(ent.radius, room, DOOR_CLEARANCE, ent)
+        return self._add(ent)
+
+    def _place_agent(self, room: int) -> None:
+        self.agent_x, self.agent_z = self._random_spot(AGENT_RADIUS, room, DOOR_CLEARANCE)
+        self.heading = self._rng.randrange(HEADINGS)
+
+    def _add(self, ent: Entity) -> Entity:
+        self.entities.append(ent)
+        return ent
+
+    def _random_spot(self, radius: float, room: int, door_clearance: float,
+                     exclude: Entity | None = None) -> tuple[float, float]:
+        """A uniformly random spot of ``room`` away from walls, doorways and other entities."""
+        m = self.layout.rooms[room]
+        margin = radius + 0.3
+        doors = [d.center for d in self.layout.doors]
+        others = [(e.x, e.z, (radius + e.radius + 0.5) ** 2) for e in self.entities
+                  if e is not exclude and e is not self.carrying]
+        rand = self._rng.uniform
+        for _ in range(1000):
+            x = rand(m.x0 + margin, m.x1 - margin)
+            z = rand(m.z0 + margin, m.z1 - margin)
+            if any((x - dx) ** 2 + (z - dz) ** 2 < door_clearance ** 2 for dx, dz in doors):
+                continue
+            if any((x - ex) ** 2 + (z - ez) ** 2 < rr for ex, ez, rr in others):
+                continue
+            return x, z
+        raise RuntimeError(f"no free spot in room {room}; is room_size too small?")
+
+
+def _as_action(action) -> int:
+    try:
+        value = int(action)
+        ok = value == action and 0 <= value <= 5
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ValueError(f"action must be an integer in 0..5, got {action!r}")
+    return value

@@ -1,0 +1,197 @@
+"""The rescue tasks: where the agent, the kit, the miner and the boulders start.
+
+| task         | rooms       | start (placement="fixed")                             | doorways | steps |
+|--------------|-------------|-------------------------------------------------------|----------|-------|
+| `one-room`   | 1           | agent, kit, miner anywhere in the room                | -        | 1000  |
+| `two-room`   | 2           | agent in room 0; kit and miner in room 1              | blocked  | 1000  |
+| `three-room` | 3 (a chain) | agent and miner in room 0; kit in room 2              | blocked  | 2000  |
+| `rooms`      | N >= 2      | agent, kit, miner each in a random room               | blocked  | 2000  |
+
+``placement="any-room"`` (domain randomisation) puts the agent, the kit and the miner each in a
+uniformly random room; the family still contains the fixed task. For ``rooms`` both placements
+are the same. Rooms are numbered in the order they were placed (the chain order for three-room).
+
+Curriculum phases of ``three-room`` (1 is the full task; the study trained 6 first):
+
+| phase | start                                                              |
+|-------|--------------------------------------------------------------------|
+| 1     | the full task                                                      |
+| 2     | agent in room 1; the boulder between rooms 0 and 1 moved aside     |
+| 3     | agent in room 2; both boulders moved aside                         |
+| 4     | agent in room 2 carrying the kit; both boulders moved aside        |
+| 5     | agent in room 1 carrying the kit; both boulders moved aside        |
+| 6     | agent in room 0 (with the miner) carrying the kit; both aside      |
+"""
+
+from __future__ import annotations
+
+import numbers
+from dataclasses import dataclass
+from typing import Callable
+
+from dqn_mine.env.entities import KIT, MINER, Entity
+from dqn_mine.env.mine import MIN_ROOM_SIZE, MineEnv
+
+MAX_ROOMS = 16
+PLACEMENTS = ("fixed", "any-room")
+
+
+@dataclass(frozen=True)
+class Phase:
+    agent_room: int
+    boulders_aside: int   # how many doorways (in chain order) are already cleared
+    carrying_kit: bool
+
+
+PHASES = {
+    1: Phase(0, 0, False),
+    2: Phase(1, 1, False),
+    3: Phase(2, 2, False),
+    4: Phase(2, 2, True),
+    5: Phase(1, 2, True),
+    6: Phase(0, 2, True),
+}
+
+
+def _one_room(env: "MineRescueEnv") -> None:
+    env._build_layout(1, chain=False)
+    env._place(MINER, 0)
+    env._place(KIT, 0)
+    env._place_agent(0)
+
+
+def _two_room(env: "MineRescueEnv") -> None:
+    env._build_layout(2, chain=False)
+    env._block_doorways()
+    agent, kit, miner = env._start_rooms(fixed=(0, 1, 1))
+    env._place(MINER, miner)
+    env._place(KIT, kit)
+    env._place_agent(agent)
+
+
+def _three_room(env: "MineRescueEnv") -> None:
+    env._build_layout(3, chain=True)
+    boulders = env._block_doorways()
+    if env.phase is None or env.phase == 1:
+        agent, kit, miner = env._start_rooms(fixed=(0, 2, 0))
+        carrying = False
+    else:
+        phase = PHASES[env.phase]
+        agent, kit, miner, carrying = phase.agent_room, 2, 0, phase.carrying_kit
+        for boulder, door in list(zip(boulders, env.layout.doors))[:phase.boulders_aside]:
+            env._move_aside(boulder, door)
+    env._place(MINER, miner)
+    if carrying:
+        env.carrying = env._add(Entity(KIT))
+    else:
+        env._place(KIT, kit)
+    env._place_agent(agent)
+
+
+def _rooms(env: "MineRescueEnv") -> None:
+    n = env.num_rooms
+    env._build_layout(n, chain=False)
+    env._block_doorways()
+    agent, kit, miner = (env._rng.randrange(n) for _ in range(3))
+    env._place(MINER, miner)
+    env._place(KIT, kit)
+    env._place_agent(agent)
+
+
+@dataclass(frozen=True)
+class Task:
+    name: str
+    rooms: int | None          # None: set by num_rooms
+    step_limit: int
+    generate: Callable[["MineRescueEnv"], None]
+
+
+TASKS = {t.name: t for t in [
+    Task("one-room", 1, 1000, _one_room),
+    Task("two-room", 2, 1000, _two_room),
+    Task("three-room", 3, 2000, _three_room),
+    Task("rooms", None, 2000, _rooms),
+]}
+DEFAULT_NUM_ROOMS = 4
+
+
+class MineRescueEnv(MineEnv):
+    """Rescue an injured miner: fetch the first-aid kit, clear boulders, deliver the kit.
+
+    | | |
+    |---|---|
+    | observation | first-person RGB, uint8 (3, 44, 76) |
+    | actions | 0 forward 0.5, 1 backward 0.5, 2 turn right 9 deg, 3 turn left 9 deg, 4 pick up / drop / exchange / deliver, 5 no-op |
+    | reward | 1.0 when the kit is handed to the miner (terminated), else 0.0 |
+    | truncation | after ``max_episode_steps`` steps |
+    | info | ``carrying``, ``carrying_kit``; at reset also ``agent_room``, ``kit_room``, ``miner_room``, ``num_rooms`` |
+
+    Args:
+        task: "one-room", "two-room", "three-room" or "rooms" (see dqn_mine/env/tasks.py).
+        num_rooms: rooms of the ``rooms`` task (>= 2, default 4); other tasks accept only their own count.
+        room_size: side of each square room in units (>= 8).
+        max_episode_steps: step limit; None means the task's default.
+        placement: "fixed" or "any-room" (domain randomisation of the start rooms).
+        phase: curriculum phase 1..6 of ``three-room`` (1 = the full task), or None.
+        render_mode: None or "rgb_array" (first-person view and map side by side).
+    """
+
+    def __init__(self, task: str = "two-room", num_rooms: int | None = None, room_size: float = 16.0,
+                 max_episode_steps: int | None = None, placement: str = "fixed", phase: int | None = None,
+                 render_mode: str | None = None):
+        if task not in TASKS:
+            raise ValueError(f"unknown task {task!r}; choose one of {', '.join(TASKS)}")
+        spec = TASKS[task]
+        self.task = task
+        self.num_rooms = _check_rooms(spec, num_rooms)
+        if not isinstance(room_size, numbers.Real) or isinstance(room_size, bool) or not room_size > 0:
+            raise ValueError(f"room_size must be a positive number, got {room_size!r}")
+        if room_size < MIN_ROOM_SIZE:
+            raise ValueError(f"room_size must be at least {MIN_ROOM_SIZE:g} to hold the entities, got {room_size!r}")
+        if max_episode_steps is None:
+            max_episode_steps = spec.step_limit
+        if not _is_int(max_episode_steps) or max_episode_steps <= 0:
+            raise ValueError(f"max_episode_steps must be a positive integer, got {max_episode_steps!r}")
+        if placement not in PLACEMENTS:
+            raise ValueError(f"placement must be one of {', '.join(PLACEMENTS)}, got {placement!r}")
+        self.placement = placement
+        self.phase = _check_phase(task, placement, phase)
+        super().__init__(max_episode_steps, room_size, render_mode)
+
+    def _generate(self) -> None:
+        TASKS[self.task].generate(self)
+
+    def _start_rooms(self, fixed: tuple[int, int, int]) -> tuple[int, int, int]:
+        """(agent, kit, miner) rooms: the task's own, or random ones under domain randomisation."""
+        if self.placement == "fixed":
+            return fixed
+        n = len(self.layout.rooms)
+        return tuple(self._rng.randrange(n) for _ in range(3))
+
+
+def _is_int(value) -> bool:
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def _check_rooms(spec: Task, num_rooms) -> int:
+    if spec.rooms is not None:
+        if num_rooms is not None and num_rooms != spec.rooms:
+            raise ValueError(f"task {spec.name!r} has exactly {spec.rooms} room(s), got num_rooms={num_rooms!r}")
+        return spec.rooms
+    if num_rooms is None:
+        return DEFAULT_NUM_ROOMS
+    if not _is_int(num_rooms) or not 2 <= num_rooms <= MAX_ROOMS:
+        raise ValueError(f"task {spec.name!r} needs an integer num_rooms in 2..{MAX_ROOMS}, got {num_rooms!r}")
+    return int(num_rooms)
+
+
+def _check_phase(task: str, placement: str, phase) -> int | None:
+    if phase is None:
+        return None
+    if task != "three-room":
+        raise ValueError(f"curriculum phases exist only for task 'three-room', not {task!r}")
+    if not _is_int(phase) or phase not in PHASES:
+        raise ValueError(f"phase must be an integer in 1..{len(PHASES)} or None, got {phase!r}")
+    if placement != "fixed":
+        raise ValueError("curriculum phases need placement='fixed'")
+    return int(phase)

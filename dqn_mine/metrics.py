@@ -1,0 +1,100 @@
+"""The run folder's metrics table, rolling episode statistics and the live progress line."""
+
+from __future__ import annotations
+
+import csv
+import math
+import time
+from collections import deque
+from pathlib import Path
+from typing import Dict, Iterable, Optional
+
+# SPEC section 8; one row every `log_interval` updates (and at the end).
+COLUMNS = (
+    "update", "wall_time", "env_steps", "episodes", "episode_return", "episode_length",
+    "eval_return", "eval_length", "updates_per_s", "env_steps_per_s", "replay_ratio",
+    "sampled_reward", "loss", "td_abs", "mean_q", "phase", "beta", "replay_size",
+)
+
+
+class MetricsTable:
+    """Append-only CSV: a resumed run continues the same file under the same header."""
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        fresh = not self.path.exists() or self.path.stat().st_size == 0
+        self._file = open(self.path, "a", newline="")
+        self._writer = csv.DictWriter(self._file, fieldnames=COLUMNS, extrasaction="ignore")
+        if fresh:
+            self._writer.writeheader()
+            self._file.flush()
+
+    def write(self, row: Dict[str, float]) -> None:
+        self._writer.writerow({k: _fmt(row.get(k)) for k in COLUMNS})
+        self._file.flush()
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def _fmt(value) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return ""
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
+def read_metrics(path: Path) -> list:
+    """The table as a list of dicts of floats (empty cells become NaN)."""
+    with open(path, newline="") as f:
+        return [{k: (float(v) if v != "" else math.nan) for k, v in row.items()}
+                for row in csv.DictReader(f)]
+
+
+class Rolling:
+    """Mean of the last ``window`` values (NaN while empty)."""
+
+    def __init__(self, window: int):
+        self.values: deque = deque(maxlen=window)
+
+    def extend(self, values: Iterable[float]) -> None:
+        self.values.extend(values)
+
+    def clear(self) -> None:
+        self.values.clear()
+
+    @property
+    def mean(self) -> float:
+        return sum(self.values) / len(self.values) if self.values else math.nan
+
+    def __len__(self) -> int:
+        return len(self.values)
+
+
+class RateMeter:
+    """Rate of a growing counter between successive calls."""
+
+    def __init__(self, start: int = 0):
+        self.last_value = start
+        self.last_time = time.perf_counter()
+
+    def rate(self, value: int) -> float:
+        now = time.perf_counter()
+        dt = now - self.last_time
+        r = (value - self.last_value) / dt if dt > 0 else math.nan
+        self.last_value, self.last_time = value, now
+        return r
+
+
+def progress_postfix(row: Dict[str, float]) -> Dict[str, str]:
+    """The few figures worth watching live in the tqdm bar."""
+    keys = {"episode_return": "ret", "eval_return": "eval", "updates_per_s": "upd/s",
+            "env_steps_per_s": "steps/s", "replay_ratio": "ratio", "loss": "loss",
+            "phase": "phase"}
+    out = {}
+    for key, short in keys.items():
+        value: Optional[float] = row.get(key)
+        if value is not None and not (isinstance(value, float) and math.isnan(value)):
+            out[short] = f"{value:.3g}"
+    return out

@@ -1,0 +1,310 @@
+"""Actor: owns a few environments, acts epsilon-greedily with one batched forward pass for all of
+them, and writes n-step transitions (with initial priorities from its own network) into its
+streams of the shared replay. Runs as a spawned process (`actor_main`) or inline (serial mode).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+from typing import List, Optional
+
+import numpy as np
+
+from dqn_mine.config import Config
+
+
+@dataclass(frozen=True)
+class ActorSpec:
+    """What one acting process needs besides the config and the shared blocks."""
+
+    index: int                   # row in the control block
+    streams: tuple               # replay streams written, one per env (empty: evaluation actor)
+    epsilon: float
+    seed: int
+    env_kwargs: dict
+    num_envs: int = 1
+    follows_curriculum: bool = True
+
+
+def env_kwargs(cfg: Config, **override) -> dict:
+    """Environment keyword arguments of a config (the trainer's envs and the eval env)."""
+    kwargs = dict(task=cfg.task, room_size=cfg.room_size,
+                  max_episode_steps=cfg.max_episode_steps, placement=cfg.placement)
+    kwargs.update(override)
+    if kwargs["task"] == "rooms":  # the other tasks have a fixed room count
+        kwargs.setdefault("num_rooms", cfg.num_rooms)
+    return kwargs
+
+
+class Actor:
+    """Acting on ``len(spec.streams)`` environments; ``step()`` advances all of them by one step."""
+
+    def __init__(self, cfg: Config, spec: ActorSpec, storage, control, weights):
+        import torch
+
+        from dqn_mine.agent.network import DuelingQNetwork
+        from dqn_mine.env import MineRescueEnv
+        from dqn_mine.replay import NStepWriter
+
+        self.cfg, self.spec, self.control, self.weights = cfg, spec, control, weights
+        self.torch = torch
+        self.rng = np.random.default_rng(spec.seed)
+        self.net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
+        self.net.eval()
+        self.version = -1
+        self.pull_weights()
+        render = {} if spec.streams else {"render_mode": "rgb_array"}  # evaluation videos
+        self.envs = [MineRescueEnv(**spec.env_kwargs, **render) for _ in range(spec.num_envs)]
+        self.writers = ([NStepWriter(storage, stream=s, eta=cfg.eta) for s in spec.streams]
+                        if spec.streams else None)
+        # Kept here rather than read from the writers so the evaluation actor, which writes no
+        # replay, feeds its network exactly the same input.
+        self.histories = np.full((len(self.envs), cfg.history_len), -1, dtype=np.int8)  # [E, h]
+        self.returns = np.zeros(len(self.envs))
+        self.phases = np.zeros(len(self.envs), dtype=np.int64)
+        self.lengths = np.zeros(len(self.envs), dtype=np.int64)
+        self.steps = 0
+        self.episodes = 0
+        self.evaluations = 0
+        self.recording: Optional[list] = None  # frames of an evaluation episode being recorded
+        f, (c, h, w) = cfg.frame_stack, self.envs[0].observation_space.shape
+        self.stacks = np.zeros((len(self.envs), f * c, h, w), dtype=np.uint8)  # [E, 3f, H, W]
+        self.carrying = np.zeros(len(self.envs), dtype=np.float32)
+        for j, env in enumerate(self.envs):
+            self.apply_curriculum(j)
+            obs, info = env.reset(seed=spec.seed * 1000 + j)
+            self._begin(j, obs, info)
+
+    # -- episode bookkeeping -----------------------------------------------------------------
+    def _begin(self, j: int, obs: np.ndarray, info: dict) -> None:
+        self.stacks[j] = 0
+        self._push_frame(j, obs)
+        self.carrying[j] = float(info["carrying"])
+        self.returns[j], self.lengths[j] = 0.0, 0
+        self.histories[j] = -1
+        if self.writers:
+            self.writers[j].begin_episode(obs, bool(info["carrying"]))
+
+    def _push_frame(self, j: int, obs: np.ndarray) -> None:
+        c = obs.shape[0]
+        self.stacks[j, :-c] = self.stacks[j, c:]   # oldest frame first, newest last
+        self.stacks[j, -c:] = obs
+
+    def _end_episode(self, j: int) -> None:
+        if j == 0 and self.recording is not None:
+            self._save_recording()  # before reset: the last frame shows how it ended
+        self.control.record_episode(self.spec.index, float(self.returns[j]),
+                                    int(self.lengths[j]), int(self.phases[j]),
+                                    is_eval=not self.spec.streams)
+        self.episodes += 1
+        self.pull_weights()   # actors pick up new weights between episodes
+        self.apply_curriculum(j)
+        obs, info = self.envs[j].reset()
+        self._begin(j, obs, info)
+
+    def apply_curriculum(self, j: int) -> None:
+        """Read the shared curriculum state between episodes and set it on environment j (the
+        episode is recorded under the phase it started in)."""
+        phase = self.phases[j] = self.control.phase
+        if not self.spec.follows_curriculum:
+            return
+        if self.cfg.curriculum == "phases":
+            self.envs[j].phase = phase
+        elif self.cfg.curriculum == "rooms":
+            self.envs[j].num_rooms = phase
+
+    def pull_weights(self) -> None:
+        version = self.weights.pull(self.net, self.version)
+        if version is not None:
+            self.version = version
+
+    # -- acting ------------------------------------------------------------------------------
+    def q_values(self, stacks: np.ndarray, histories: np.ndarray,
+                 carrying: np.ndarray) -> np.ndarray:
+        torch = self.torch
+        with torch.inference_mode():
+            q = self.net(torch.from_numpy(stacks), torch.from_numpy(histories),
+                         torch.from_numpy(carrying))
+        return q.numpy()                                            # [E, A]
+
+    def step(self) -> int:
+        """One step of every environment; returns the number of env steps taken."""
+        q = self.q_values(self.stacks, self.histories, self.carrying)  # [E, A]
+        actions = q.argmax(axis=1)
+        explore = self.rng.random(len(actions)) < self.spec.epsilon
+        actions[explore] = self.rng.integers(0, q.shape[1], int(explore.sum()))
+        for j, env in enumerate(self.envs):
+            self._step_env(j, env, int(actions[j]), q[j])
+        self.steps += len(self.envs)
+        if self.spec.streams:  # evaluation steps are not training experience
+            self.control.actor_steps[self.spec.index] = self.steps
+        return len(self.envs)
+
+    def _step_env(self, j: int, env, action: int, q: np.ndarray) -> None:
+        obs, reward, terminated, truncated, info = env.step(action)
+        self.returns[j] += reward
+        self.lengths[j] += 1
+        self._push_frame(j, obs)
+        self.carrying[j] = float(info["carrying"])
+        if self.cfg.history_len:
+            self.histories[j, :-1] = self.histories[j, 1:]   # oldest first, newest last
+            self.histories[j, -1] = action
+        if self.writers:
+            next_q = None
+            if truncated and not terminated:
+                # A time limit is not a terminal state: the final frame is bootstrapped from,
+                # so its value enters the initial priority. Rare enough for a batch-1 forward.
+                next_q = self.q_values(self.stacks[j:j + 1], self.histories[j:j + 1],
+                                       self.carrying[j:j + 1])[0]
+            self.writers[j].append(q, action, float(reward), obs, bool(info["carrying"]),
+                                   bool(terminated), bool(truncated), next_q=next_q)
+        if terminated or truncated:
+            self._end_episode(j)
+
+    # -- loop --------------------------------------------------------------------------------
+    def allowed_steps(self) -> float:
+        """Step budget under a fixed replay ratio (inf when free-running)."""
+        cfg = self.cfg
+        if not cfg.replay_ratio:
+            return float("inf")
+        share = self.control.updates / cfg.replay_ratio / max(1, cfg.actors)
+        slack = 2 * cfg.batch_size / cfg.replay_ratio / max(1, cfg.actors) + 64
+        return cfg.prefill + share + slack
+
+    def run(self) -> None:
+        if not self.spec.streams:
+            return self.run_evaluations()
+        while not self.control.stopping:
+            if self.steps >= self.allowed_steps():
+                time.sleep(0.002)
+                continue
+            self.step()
+        self.close()
+
+    def run_evaluations(self) -> None:
+        """Evaluation actor: ``eval_episodes`` episodes with the latest weights every
+        ``eval_every`` training env steps (paced by the training actors so that evaluation
+        does not steal cores from them)."""
+        next_at = self.cfg.eval_every
+        while not self.control.stopping:
+            if self.control.total_actor_steps() < next_at:
+                time.sleep(0.05)
+                continue
+            self.evaluate(self.cfg.eval_episodes)
+            next_at += self.cfg.eval_every
+        self.close()
+
+    def evaluate(self, episodes: int) -> None:
+        """Run ``episodes`` episodes; now and then record the first one as a GIF."""
+        self.pull_weights()
+        every = self.cfg.eval_video_every
+        self.evaluations += 1
+        if every and self.cfg.run_dir and (self.evaluations - 1) % every == 0:
+            self.recording = [self.envs[0].render()]
+        target = self.episodes + episodes
+        while self.episodes < target and not self.control.stopping:
+            self.step()
+            if self.recording is not None:
+                self.recording.append(self.envs[0].render())
+
+    def _save_recording(self) -> None:
+        from dqn_mine.play import save_gif
+
+        frames, self.recording = self.recording, None
+        name = f"eval_{self.control.total_actor_steps():010d}.gif"
+        save_gif(frames, Path(self.cfg.run_dir) / "videos" / name, fps=15)
+
+    def close(self) -> None:
+        for w in self.writers or ():
+            w.flush()
+        for env in self.envs:
+            env.close()
+
+
+def actor_main(cfg: Config, spec: ActorSpec, handle: tuple, errors) -> None:
+    """Entry point of a spawned actor process."""
+    # The runner handles Ctrl-C and tells actors to stop through shared state; an actor that
+    # died on SIGINT mid-write would leave a half-published block.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    blocks = None
+    try:
+        import torch
+
+        torch.set_num_threads(1)
+        blocks, storage, control, weights = attach_all(cfg, handle)
+        Actor(cfg, spec, storage, control, weights).run()
+    except BaseException as exc:  # report every failure to the runner, then exit non-zero
+        errors.send((spec.index, f"{type(exc).__name__}: {exc}", traceback.format_exc()))
+        raise SystemExit(1)
+    finally:
+        if blocks is not None:
+            blocks.close()
+
+
+def attach_all(cfg: Config, handle: tuple):
+    """Attach the run's blocks and build the views an acting process needs."""
+    from dqn_mine.replay import ReplayStorage
+    from dqn_mine.system.control import Control
+    from dqn_mine.system.layout import replay_layout
+    from dqn_mine.system.shared import SharedBlocks
+    from dqn_mine.system.weights import WeightBroadcast
+
+    blocks = SharedBlocks.attach(handle)
+    return blocks, ReplayStorage(replay_layout(cfg), blocks), Control(blocks), \
+        WeightBroadcast(blocks)
+
+
+def initial_phase(cfg: Config) -> int:
+    """Start of the curriculum: the easiest phase (6), or the first room count."""
+    if cfg.curriculum == "phases":
+        return 6
+    if cfg.curriculum == "rooms":
+        return int(cfg.rooms_schedule[0])
+    return 0
+
+
+def actor_specs(cfg: Config) -> List[ActorSpec]:
+    """One spec per training actor (streams numbered actor-major), then the evaluation actor."""
+    from dqn_mine.agent.learning import epsilon_for_actor
+
+    e = cfg.envs_per_actor
+    specs = []
+    for i in range(cfg.actors):
+        eps = cfg.epsilon if cfg.epsilon_schedule == "fixed" else \
+            epsilon_for_actor(i, cfg.actors)
+        specs.append(ActorSpec(index=i, streams=tuple(range(i * e, (i + 1) * e)), epsilon=eps,
+                               seed=cfg.seed * 7919 + i, env_kwargs=env_kwargs(cfg), num_envs=e))
+    if cfg.eval_every:
+        specs.append(ActorSpec(index=cfg.actors, streams=(), epsilon=cfg.eval_epsilon,
+                               seed=cfg.seed * 7919 + 7000 + cfg.actors,
+                               env_kwargs=eval_env_kwargs(cfg), follows_curriculum=False))
+    return specs
+
+
+def eval_env_kwargs(cfg: Config) -> dict:
+    """The target task: the full problem, fixed placement, the schedule's last room count."""
+    override = {"placement": "fixed"}
+    if cfg.eval_task and cfg.eval_task != cfg.task:
+        override.update(task=cfg.eval_task, max_episode_steps=None)
+    if cfg.curriculum == "rooms":
+        override["num_rooms"] = int(cfg.rooms_schedule[-1])
+    return env_kwargs(cfg, **override)
+
+
+def prefill_target(cfg: Config) -> int:
+    """Env steps all actors together must publish before the learner starts."""
+    return cfg.prefill * cfg.actors
+
+
+def first_error(conn) -> Optional[tuple]:
+    """The error an actor reported on its pipe, if any (non-blocking)."""
+    try:
+        return conn.recv() if conn.poll() else None
+    except (EOFError, OSError):  # closed without a report: the exit code tells the rest
+        return None

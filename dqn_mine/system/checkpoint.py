@@ -1,0 +1,46 @@
+"""Checkpoints: network, target, optimiser, counters and config in one ``checkpoint.pt``.
+
+Written to a temporary file and renamed, so a run killed mid-write keeps its previous checkpoint.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+FILENAME = "checkpoint.pt"
+FORMAT = 1
+
+
+class CheckpointError(ValueError):
+    """A checkpoint is missing, unreadable or not one of ours (the message is one line)."""
+
+
+def save(run_dir: Path, updater_state: dict, counters: dict, cfg) -> Path:
+    import torch
+
+    path = Path(run_dir) / FILENAME
+    tmp = path.with_suffix(".pt.tmp")
+    torch.save({"format": FORMAT, "updater": updater_state, "counters": dict(counters),
+                "config": cfg.to_dict()}, tmp)
+    os.replace(tmp, path)
+    return path
+
+
+def load(path: Path, map_location: str = "cpu") -> dict:
+    """The checkpoint dict; ``path`` may be a run folder or a ``.pt`` file."""
+    import torch
+
+    path = Path(path)
+    if path.is_dir():
+        path = path / FILENAME
+    if not path.is_file():
+        raise CheckpointError(f"no checkpoint at {path}")
+    try:
+        state = torch.load(path, map_location=map_location, weights_only=False)
+    except Exception as exc:
+        raise CheckpointError(f"checkpoint {path} is unreadable ({type(exc).__name__}); "
+                              "it may be truncated or corrupt") from None
+    if not isinstance(state, dict) or state.get("format") != FORMAT or "updater" not in state:
+        raise CheckpointError(f"{path} is not a dqn_mine checkpoint")
+    return state

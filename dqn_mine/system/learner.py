@@ -1,0 +1,129 @@
+"""Learner: prioritised n-step double-DQN updates fed by a background batch prefetcher.
+
+The prefetch thread is the single owner of the replay's trees: it ingests what actors published,
+samples and moves batches to the device; priority feedback from the update loop is queued by
+the replay itself and applied in that thread. The update loop only ever touches ready batches, so
+sampling overlaps the forward/backward pass.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+from typing import Callable, Optional
+
+import numpy as np
+
+from dqn_mine.config import Config
+
+
+class BatchSource:
+    """Ready batches on the device; threaded (parallel runs) or inline (serial mode, tests)."""
+
+    def __init__(self, replay, batch_size: int, beta: Callable[[], float], to_device: Callable,
+                 queue_size: int = 4, threaded: bool = True):
+        self.replay, self.batch_size, self.beta, self.to_device = replay, batch_size, beta, \
+            to_device
+        self.ready: "queue.Queue" = queue.Queue(maxsize=queue_size)
+        self.error: Optional[BaseException] = None
+        self._stop = threading.Event()
+        self._thread = None
+        if threaded:
+            self._thread = threading.Thread(target=self._loop, name="batch-prefetch", daemon=True)
+            self._thread.start()
+
+    def _make_batch(self):
+        """One sampled batch on the device, or None while the replay is too small."""
+        self.replay.ingest()
+        if len(self.replay) < self.batch_size:
+            return None
+        batch = self.replay.sample(self.batch_size, self.beta())
+        return batch, self.to_device(batch)
+
+    def _loop(self) -> None:
+        try:
+            while not self._stop.is_set():
+                item = self._make_batch()
+                if item is None:
+                    self._stop.wait(0.01)
+                    continue
+                while not self._stop.is_set():
+                    try:
+                        self.ready.put(item, timeout=0.1)
+                        break
+                    except queue.Full:
+                        self.replay.apply_priority_updates()
+        except BaseException as exc:  # surfaced by get() in the learner's thread
+            self.error = exc
+
+    def get(self, timeout: float = 0.5):
+        """(numpy batch, device batch) or None if none became ready within ``timeout``."""
+        if self._thread is None:
+            return self._make_batch()
+        if self.error is not None:
+            raise RuntimeError(f"batch prefetch thread failed: {self.error!r}") from self.error
+        try:
+            return self.ready.get(timeout=timeout)
+        except queue.Empty:
+            return None
+
+    def ingest(self) -> int:
+        """Used before the learner starts (pre-fill), when no thread samples yet."""
+        return 0 if self._thread is not None else self.replay.ingest()
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+
+
+class Learner:
+    """The update loop's state: network updater, batch source, weight publishing."""
+
+    def __init__(self, cfg: Config, storage, control, weights, device: str,
+                 threaded: bool = True):
+        from dqn_mine.agent.learning import DQNUpdater, batch_to_device
+        from dqn_mine.agent.network import DuelingQNetwork
+        from dqn_mine.replay import PrioritizedReplay
+
+        self.cfg, self.control, self.weights, self.device = cfg, control, weights, device
+        net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
+        self.updater = DQNUpdater(net, lr=cfg.lr, target_update_interval=cfg.target_update_interval,
+                                  device=device, max_grad_norm=cfg.max_grad_norm)
+        self.replay = PrioritizedReplay(storage, zeta=cfg.zeta if cfg.per else 0.0, eta=cfg.eta,
+                                        seed=cfg.seed, init_priority=cfg.init_priority)
+        self.updates = 0
+        self.source = BatchSource(
+            self.replay, cfg.batch_size, beta=self.beta,
+            to_device=lambda b: batch_to_device(b, device), threaded=threaded)
+
+    def beta(self) -> float:
+        from dqn_mine.replay import beta_at
+
+        return beta_at(self.updates, self.cfg.updates, self.cfg.beta0)
+
+    def load_state(self, state: dict) -> None:
+        self.updater.load_state_dict(state["updater"])
+        self.updates = int(state["counters"]["updates"])
+        self.control.updates = self.updates
+
+    def publish(self) -> None:
+        self.weights.publish(self.updater.online)
+
+    def step(self) -> Optional[dict]:
+        """One network update; None if no batch was ready."""
+        item = self.source.get()
+        if item is None:
+            return None
+        batch, device_batch = item
+        stats = self.updater.update(device_batch)
+        self.replay.update_priorities(batch.indices, stats["td_abs"])  # queued, thread-safe
+        self.updates += 1
+        self.control.updates = self.updates
+        if self.updates % self.cfg.publish_interval == 0:
+            self.publish()
+        stats["td_abs"] = float(np.mean(stats["td_abs"]))
+        return stats
+
+    def close(self) -> None:
+        self.source.close()

@@ -1,0 +1,94 @@
+"""`python -m dqn_mine.train`: train an Ape-X style DQN agent on the mine.
+
+Examples::
+
+    python -m dqn_mine.train --preset smoke          # a short CPU run on a small one-room task
+    python -m dqn_mine.train --actors 7 --n-step 6   # the study's configuration on two-room
+    python -m dqn_mine.train --resume runs/<run>     # continue a stopped run
+
+Exit codes: 0 finished, 1 an actor or the learner failed, 2 bad input, 130 stopped by a signal
+(a resumable checkpoint is written in every case but bad input).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+from pathlib import Path
+from typing import Optional, Sequence, Tuple
+
+from dqn_mine.config import Config, ConfigError, parse_args, resolve_device
+from dqn_mine.system import checkpoint as ckpt
+from dqn_mine.system.checkpoint import CheckpointError
+from dqn_mine.system.shared import SharedMemoryError, check_free_space
+
+PROG = "dqn_mine.train"
+
+
+def check_shared_memory(cfg: Config) -> None:
+    """Fail before anything is written if the replay cannot fit in /dev/shm."""
+    from dqn_mine.replay import ReplayLayout  # noqa: F401  (imported for its cost up front)
+    from dqn_mine.system.layout import replay_layout
+
+    check_free_space(replay_layout(cfg).nbytes)
+
+
+def check_env_settings(cfg: Config) -> None:
+    """Let the environment judge its own arguments (it creates no GL context until it renders)."""
+    from dqn_mine.env import MineRescueEnv
+    from dqn_mine.system.actor import actor_specs
+
+    for spec in actor_specs(cfg)[-1:] + actor_specs(cfg)[:1]:
+        try:
+            MineRescueEnv(**spec.env_kwargs).close()
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+
+
+def open_run(cfg: Config) -> Tuple[Config, Path, Optional[dict]]:
+    """Validate everything that can fail, then create (or reuse) the run folder."""
+    # parse_args already rebuilt a resumed run's config from its config.json.
+    state = ckpt.load(cfg.resume) if cfg.resume else None
+    resolve_device(cfg.device)
+    check_env_settings(cfg)
+    check_shared_memory(cfg)
+    cfg = cfg.with_run_dir()
+    run_dir = Path(cfg.run_dir)
+    if state is None:
+        if (run_dir / "config.json").exists():
+            raise ConfigError(f"{run_dir} already holds a run: use --resume {run_dir} "
+                              "or another --run-dir")
+        run_dir.mkdir(parents=True, exist_ok=True)
+    cfg.to_json(run_dir / "config.json")  # on resume: with the flags that overrode it
+    return cfg, run_dir, state
+
+
+def report(summary) -> None:
+    s = summary
+    print(f"\n{PROG}: {s.reason} after {s.updates} updates, {s.env_steps} env steps, "
+          f"{s.episodes} episodes in {s.wall_time:.0f} s")
+    print(f"  mean return (last episodes) {s.episode_return:.3f} | {s.updates_per_s:.1f} upd/s | "
+          f"{s.env_steps_per_s:.0f} steps/s | replay ratio {s.replay_ratio:.3f}")
+    print(f"  run folder {s.run_dir} (config.json, metrics.csv, checkpoint.pt)")
+    if s.exit_code == 130:
+        print(f"  resume with: python -m {PROG} --resume {s.run_dir}")
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    from dqn_mine.system.runner import Run
+
+    try:
+        cfg = parse_args(argv)
+        cfg, run_dir, state = open_run(cfg)
+    except (ConfigError, CheckpointError, SharedMemoryError) as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    summary = Run(cfg, run_dir, state, serial=cfg.serial, progress=cfg.progress).execute()
+    (run_dir / "summary.json").write_text(json.dumps(dataclasses.asdict(summary), indent=2))
+    report(summary)
+    return summary.exit_code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""One grid file per experiment of the study (SPEC section 7); see :mod:`experiments.grid`."""

@@ -1,0 +1,168 @@
+"""The configuration: defaults of SPEC section 6, CLI built from the dataclass, presets, validation,
+json round trip."""
+
+import dataclasses
+
+import pytest
+import torch
+
+from dqn_mine.config import (PRESETS, Config, ConfigError, build_parser, parse_args,
+                             resolve_device, to_argv)
+
+
+def test_defaults_are_the_studys():
+    c = Config()
+    assert (c.actors, c.epsilon, c.epsilon_schedule, c.lr, c.batch_size, c.gamma, c.n_step) == \
+        (7, 0.01, "fixed", 3e-5, 32, 0.99, 6)
+    assert (c.replay_capacity, c.per, c.zeta, c.beta0, c.eta, c.init_priority) == \
+        (1_048_576, True, 0.6, 0.4, 1e-5, "actor")
+    assert (c.history_len, c.frame_stack, c.publish_interval, c.prefill, c.task) == \
+        (20, 1, 500, 50_000, "two-room")
+    assert parse_args([]) == c.validate()
+
+
+def test_every_field_has_a_flag_with_one_line_help():
+    helptext = build_parser().format_help()
+    for f in dataclasses.fields(Config):
+        assert f.metadata["help"] and "\n" not in f.metadata["help"]
+        assert f"--{f.name.replace('_', '-')}" in helptext
+
+
+def test_frozen():
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        Config().actors = 3
+
+
+def test_flag_types():
+    c = parse_args(["--no-per", "--rooms-schedule", "3", "4", "--max-episode-steps", "300",
+                    "--replay-ratio", "0.05", "--max-grad-norm", "none", "--task", "rooms"])
+    assert c.per is False and c.rooms_schedule == (3, 4) and c.max_episode_steps == 300
+    assert c.replay_ratio == 0.05 and c.max_grad_norm is None
+    assert parse_args(["--per"]).per is True
+
+
+def test_cli_round_trip():
+    c = Config(task="rooms", num_rooms=4, room_size=12.5, max_episode_steps=123, per=False,
+               lr=1 / 3, rooms_schedule=(4, 5), replay_ratio=0.02, eval_task="three-room",
+               max_grad_norm=None, run_dir="runs/x y", preset="smoke", seed=9, serial=True,
+               progress=False)
+    assert parse_args(to_argv(c)) == c
+    assert parse_args(to_argv(Config())) == Config()
+
+
+def test_preset_precedence_defaults_preset_flags():
+    smoke = parse_args(["--preset", "smoke"])
+    for name, value in PRESETS["smoke"].items():
+        assert getattr(smoke, name) == value
+    assert smoke.gamma == Config().gamma  # not in the preset: default
+    c = parse_args(["--lr", "0.5", "--preset", "smoke"])  # flag order does not matter
+    assert c.lr == 0.5 and c.actors == PRESETS["smoke"]["actors"] and c.preset == "smoke"
+    # an explicit flag equal to the default still beats the preset
+    assert parse_args(["--preset", "smoke", "--actors", "7"]).actors == 7
+
+
+BAD = [
+    (["--actors", "0"], "--actors"),
+    (["--envs-per-actor", "0"], "--envs-per-actor"),
+    (["--n-step", "0"], "--n-step"),
+    (["--batch-size", "0"], "--batch-size"),
+    (["--replay-capacity", "16"], "smaller than --batch-size"),
+    (["--replay-capacity", "64", "--batch-size", "8", "--actors", "10"], "slots"),
+    (["--task", "cave"], "invalid choice"),
+    (["--device", "tpu"], "invalid choice"),
+    (["--placement", "anywhere"], "invalid choice"),
+    (["--preset", "huge"], "unknown preset"),
+    (["--actors", "two"], "invalid int"),
+    (["--zeta", "-0.1"], "--zeta"),
+    (["--beta0", "1.5"], "--beta0"),
+    (["--beta0", "-0.1"], "--beta0"),
+    (["--eta", "0"], "--eta"),
+    (["--gamma", "0"], "--gamma"),
+    (["--gamma", "1.01"], "--gamma"),
+    (["--epsilon", "2"], "--epsilon"),
+    (["--eval-epsilon", "-1"], "--eval-epsilon"),
+    (["--return-window", "0"], "--return-window"),
+    (["--lr", "0"], "--lr"),
+    (["--frame-stack", "0"], "--frame-stack"),
+    (["--history-len", "-1"], "--history-len"),
+    (["--target-update-interval", "0"], "--target-update-interval"),
+    (["--publish-interval", "0"], "--publish-interval"),
+    (["--replay-ratio", "0"], "--replay-ratio"),
+    (["--max-grad-norm", "-1"], "--max-grad-norm"),
+    (["--room-size", "0"], "--room-size"),
+    (["--max-episode-steps", "0"], "--max-episode-steps"),
+    (["--task", "rooms", "--num-rooms", "1"], "--num-rooms"),
+    (["--curriculum", "phases"], "three-room"),
+    (["--curriculum", "rooms", "--task", "rooms", "--rooms-schedule", "1", "3"],
+     "--rooms-schedule"),
+    (["--eval-task", "cave"], "--eval-task"),
+    (["--prefill", "-1"], "--prefill"),
+    (["--bogus", "1"], "unrecognized"),
+    (["--resume", "/nonexistent/run"], "--resume"),
+]
+
+
+@pytest.mark.parametrize("argv,fragment", BAD, ids=[" ".join(a) for a, _ in BAD])
+def test_bad_flags_give_one_line_errors(argv, fragment):
+    with pytest.raises(ConfigError) as info:
+        parse_args(argv)
+    message = str(info.value)
+    assert fragment in message and "\n" not in message
+
+
+def test_json_round_trip(tmp_path):
+    c = Config(lr=1 / 3, rooms_schedule=(3, 5), max_episode_steps=None, replay_ratio=0.1 + 0.2,
+               eta=1e-7, run_dir=str(tmp_path), per=False)
+    c.to_json(tmp_path / "config.json")
+    back = Config.from_json(tmp_path / "config.json")
+    assert back == c and isinstance(back.rooms_schedule, tuple)
+
+
+@pytest.mark.parametrize("content,fragment", [
+    ("{not json", "corrupt"), ('{"actors": 3, "warp": 9}', "unknown settings warp"),
+    ("[1, 2]", "json object"), ('{"actors": "7"}', "actors = '7'"),
+    ('{"rooms_schedule": [3, "x"]}', "rooms_schedule"), ('{"lr": null}', "lr = None"),
+    (b"\xff\xfe\x00", "corrupt"), (None, "no config file")])
+def test_bad_json_files(tmp_path, content, fragment):
+    path = tmp_path / "config.json"
+    if isinstance(content, bytes):
+        path.write_bytes(content)
+    elif content is not None:
+        path.write_text(content)
+    with pytest.raises(ConfigError) as info:
+        Config.from_json(path)
+    assert fragment in str(info.value) and "\n" not in str(info.value)
+
+
+def test_resume_loads_the_saved_config_and_flags_still_win(tmp_path):
+    saved = parse_args(["--preset", "smoke", "--seed", "4"]).with_run_dir()
+    saved.to_json(tmp_path / "config.json")
+    c = parse_args(["--resume", str(tmp_path), "--updates", "99"])
+    assert c == dataclasses.replace(saved, updates=99, resume=str(tmp_path), run_dir=str(tmp_path))
+    (tmp_path / "config.json").write_text("{")
+    with pytest.raises(ConfigError, match="--resume"):
+        parse_args(["--resume", str(tmp_path)])
+
+
+def test_run_dir_name():
+    c = Config(task="one-room", preset="smoke", seed=3).with_run_dir(now=0)
+    assert c.run_dir.startswith("runs/one-room__smoke__3__") and len(c.run_dir.split("__")) == 4
+    assert Config(run_dir="x").with_run_dir().run_dir == "x"
+
+
+def test_resolve_device():
+    assert resolve_device("cpu") == torch.device("cpu")
+    if torch.cuda.is_available():
+        assert resolve_device("auto").type == "cuda"
+    else:
+        assert resolve_device("auto").type == "cpu"
+        with pytest.raises(ConfigError, match="no CUDA"):
+            resolve_device("cuda")
+
+
+def test_learner_threads():
+    from dqn_mine.config import learner_threads
+    assert learner_threads(Config(actors=2), cores=2) == 1
+    assert learner_threads(Config(actors=7), cores=16) == 9
+    assert learner_threads(Config(actors=7, eval_every=10_000), cores=16) == 8
+    assert learner_threads(Config(actors=2, learner_threads=3), cores=2) == 3

@@ -1,0 +1,94 @@
+"""Curriculum state, room-count schedule and the evaluation actor, through real runs."""
+
+from __future__ import annotations
+
+import csv
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from dqn_mine.config import parse_args
+from dqn_mine.system.actor import actor_specs, eval_env_kwargs, initial_phase
+
+ROOT = Path(__file__).resolve().parents[1]
+FAST = ["--actors", "2", "--prefill", "100", "--replay-capacity", "4096", "--log-interval", "10",
+        "--no-progress", "--max-episode-steps", "30", "--room-size", "8"]
+
+
+def run(*args: str) -> list:
+    res = subprocess.run([sys.executable, "-m", "dqn_mine.train", *args], cwd=ROOT,
+                         capture_output=True, text=True, timeout=400)
+    assert res.returncode == 0, res.stderr[-3000:]
+    run_dir = Path(args[args.index("--run-dir") + 1])
+    with open(run_dir / "metrics.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_phases_advance_through_shared_state(tmp_path):
+    """A threshold every episode beats moves the phase from 6 to 1; the actors follow it
+    (each phase gets its own window of episodes, all started in that phase)."""
+    rows = run("--task", "three-room", "--curriculum", "phases", "--curriculum-window", "2",
+               "--curriculum-threshold", "-1", "--updates", "400", "--serial",
+               "--run-dir", str(tmp_path / "cl"), *FAST)
+    phases = [int(r["phase"]) for r in rows]
+    assert phases == sorted(phases, reverse=True), phases
+    assert phases[-1] == 1 and phases[0] < 6
+
+
+def test_phase_holds_when_returns_stay_below_threshold(tmp_path):
+    rows = run("--task", "three-room", "--curriculum", "phases", "--curriculum-window", "2",
+               "--curriculum-threshold", "1.0", "--updates", "40",
+               "--run-dir", str(tmp_path / "hold"), *FAST)
+    assert {int(r["phase"]) for r in rows} == {6}
+
+
+def test_room_schedule_switches_at_the_right_update(tmp_path):
+    rows = run("--task", "rooms", "--curriculum", "rooms", "--rooms-schedule", "2", "3", "4",
+               "--updates", "90", "--serial", "--run-dir", str(tmp_path / "rooms"), *FAST)
+    by_update = {int(r["update"]): int(r["phase"]) for r in rows}
+    assert [by_update[u] for u in (10, 20, 30, 40, 60, 70, 80)] == [2, 2, 3, 3, 4, 4, 4]
+
+
+def test_evaluation_results_arrive_in_the_metrics(tmp_path):
+    rows = run("--task", "one-room", "--eval-every", "200", "--eval-episodes", "2",
+               "--eval-video-every", "1", "--updates", "200",
+               "--run-dir", str(tmp_path / "eval"), *FAST)
+    evaluated = [r for r in rows if r["eval_return"] != ""]
+    assert evaluated, "no evaluation result reached metrics.csv"
+    assert all(0.0 <= float(r["eval_return"]) <= 1.0 for r in evaluated)
+    assert all(1 <= float(r["eval_length"]) <= 30 for r in evaluated)
+    videos = sorted((tmp_path / "eval" / "videos").glob("eval_*.gif"))
+    assert videos, "no evaluation video was saved"
+    from PIL import Image
+
+    with Image.open(videos[0]) as gif:
+        assert gif.n_frames >= 2
+
+
+def test_evaluation_actor_runs_the_full_target_task():
+    cfg = parse_args(["--task", "three-room", "--curriculum", "phases", "--placement",
+                      "any-room", "--eval-every", "1000"])
+    specs = actor_specs(cfg)
+    evaluator = specs[-1]
+    assert len(specs) == cfg.actors + 1 and evaluator.streams == ()
+    assert not evaluator.follows_curriculum
+    assert evaluator.env_kwargs["placement"] == "fixed" and evaluator.env_kwargs["task"] == \
+        "three-room"
+    assert initial_phase(cfg) == 6
+    rooms = parse_args(["--task", "rooms", "--curriculum", "rooms", "--rooms-schedule", "3", "4",
+                        "5", "--eval-every", "1000"])
+    assert eval_env_kwargs(rooms)["num_rooms"] == 5 and initial_phase(rooms) == 3
+
+
+@pytest.mark.parametrize("value", [math.nan])
+def test_metrics_nan_cells_are_empty(tmp_path, value):
+    from dqn_mine.metrics import MetricsTable, read_metrics
+
+    table = MetricsTable(tmp_path / "m.csv")
+    table.write({"update": 1, "eval_return": value, "loss": 0.5})
+    table.close()
+    row = read_metrics(tmp_path / "m.csv")[0]
+    assert row["update"] == 1 and row["loss"] == 0.5 and math.isnan(row["eval_return"])

@@ -1,0 +1,184 @@
+"""The trainer end to end: real spawned actors, real shared memory, real signals."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from dqn_mine.system.shared import leftover_segments
+
+ROOT = Path(__file__).resolve().parents[1]
+# A tiny fast configuration on top of the smoke preset.
+TINY = ["--preset", "smoke", "--actors", "2", "--prefill", "200", "--replay-capacity", "4096",
+        "--log-interval", "20", "--checkpoint-interval", "1000", "--no-progress"]
+
+
+def train_cmd(*args: str) -> list:
+    return [sys.executable, "-m", "dqn_mine.train", *args]
+
+
+def run_train(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run(train_cmd(*args), cwd=ROOT, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def metrics_rows(run_dir: Path) -> list:
+    with open(run_dir / "metrics.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def children_of(pid: int) -> list:
+    out = subprocess.run(["pgrep", "-P", str(pid)], capture_output=True, text=True).stdout
+    return [int(p) for p in out.split()]
+
+
+def alive(pids: list) -> list:
+    out = []
+    for pid in pids:
+        try:
+            with open(f"/proc/{pid}/status") as f:
+                if "zombie" not in f.read().lower():
+                    out.append(pid)
+        except FileNotFoundError:
+            pass
+    return out
+
+
+def wait_for(predicate, timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.2)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+@pytest.fixture(autouse=True)
+def no_leftovers():
+    before = set(leftover_segments())
+    yield
+    assert set(leftover_segments()) - before == set(), "shared memory segments leaked"
+
+
+# -- bad input -------------------------------------------------------------------------------
+@pytest.mark.parametrize("flags, phrase", [
+    (["--actors", "0"], "actors"),
+    (["--n-step", "0"], "n-step"),
+    (["--task", "four-room"], "task"),
+    (["--replay-capacity", "16", "--batch-size", "32"], "capacity"),
+    (["--resume", "no/such/run"], "no/such/run"),
+])
+def test_bad_flags_give_one_line_and_touch_nothing(tmp_path, flags, phrase):
+    run_dir = tmp_path / "run"
+    res = run_train(*flags, "--run-dir", str(run_dir), timeout=60)
+    assert res.returncode == 2
+    lines = [ln for ln in res.stderr.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1, res.stderr
+    assert phrase.replace("-", "") in lines[0].replace("-", "").replace("_", "").lower()
+    assert not run_dir.exists()
+
+
+def test_resume_of_corrupt_run_is_one_line(tmp_path):
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    (run_dir / "config.json").write_text("{not json")
+    res = run_train("--resume", str(run_dir), timeout=60)
+    assert res.returncode == 2
+    assert len(res.stderr.strip().splitlines()) == 1, res.stderr
+    assert sorted(p.name for p in run_dir.iterdir()) == ["config.json"]
+
+
+# -- serial wiring ---------------------------------------------------------------------------
+def test_serial_run_writes_the_run_folder(tmp_path):
+    run_dir = tmp_path / "serial"
+    res = run_train(*TINY, "--serial", "--updates", "60", "--run-dir", str(run_dir))
+    assert res.returncode == 0, res.stderr[-3000:]
+    cfg = json.loads((run_dir / "config.json").read_text())
+    assert cfg["actors"] == 2 and cfg["serial"] is True
+    rows = metrics_rows(run_dir)
+    assert [int(r["update"]) for r in rows] == [20, 40, 60]
+    assert int(rows[-1]["env_steps"]) >= 400          # the pre-fill at least
+    assert float(rows[-1]["loss"]) >= 0
+    assert (run_dir / "checkpoint.pt").exists()
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["updates"] == 60 and summary["exit_code"] == 0
+
+
+# -- parallel runs ---------------------------------------------------------------------------
+def test_parallel_run_with_two_actors(tmp_path):
+    run_dir = tmp_path / "par"
+    res = run_train(*TINY, "--updates", "100", "--run-dir", str(run_dir))
+    assert res.returncode == 0, res.stderr[-3000:]
+    rows = metrics_rows(run_dir)
+    assert int(rows[-1]["update"]) == 100
+    assert float(rows[-1]["replay_ratio"]) > 0
+    assert float(rows[-1]["env_steps_per_s"]) > 0
+
+
+def test_sigint_stops_cleanly_and_resume_continues(tmp_path):
+    run_dir = tmp_path / "int"
+    proc = subprocess.Popen(train_cmd(*TINY, "--updates", "100000", "--run-dir", str(run_dir)),
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for(lambda: (run_dir / "metrics.csv").exists() and len(metrics_rows(run_dir)) >= 2,
+                 240, "training to log")
+        kids = children_of(proc.pid)
+        assert len([k for k in kids]) >= 2
+        t0 = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+        assert time.monotonic() - t0 < 30
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err[-3000:]
+    assert "--resume" in out
+    wait_for(lambda: not alive(kids), 10, "every child process to exit")
+    stopped_at = int(metrics_rows(run_dir)[-1]["update"])
+    res = run_train("--resume", str(run_dir), "--updates", str(stopped_at + 40))
+    assert res.returncode == 0, res.stderr[-3000:]
+    updates = [int(r["update"]) for r in metrics_rows(run_dir)]
+    assert updates[-1] == stopped_at + 40
+    assert updates == sorted(updates)
+
+
+def test_killed_actor_stops_the_run_with_an_error(tmp_path):
+    run_dir = tmp_path / "kill"
+    proc = subprocess.Popen(train_cmd(*TINY, "--updates", "100000", "--run-dir", str(run_dir)),
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for(lambda: (run_dir / "metrics.csv").exists(), 240, "the run to start")
+        kids = children_of(proc.pid)
+        actors = [k for k in kids
+                  if "spawn_main" in open(f"/proc/{k}/cmdline").read().replace("\0", " ")]
+        assert actors, "no actor process found"
+        os.kill(actors[0], signal.SIGKILL)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 1
+    assert "actor 0 died (killed by SIGKILL)" in out + err
+    assert (run_dir / "checkpoint.pt").exists()
+    wait_for(lambda: not alive(kids), 10, "every child process to exit")
+
+
+# -- learning --------------------------------------------------------------------------------
+@pytest.mark.slow
+def test_smoke_preset_learns_one_room(tmp_path):
+    """The whole system learns a small task on CPU (the README's main job)."""
+    run_dir = tmp_path / "learn"
+    res = run_train("--preset", "smoke", "--no-progress", "--run-dir", str(run_dir),
+                    timeout=1500)
+    assert res.returncode == 0, res.stderr[-3000:]
+    rows = metrics_rows(run_dir)
+    final = float(rows[-1]["episode_return"])
+    assert final >= 0.8, f"smoke preset ended at mean return {final:.2f}"
