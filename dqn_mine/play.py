@@ -30,10 +30,38 @@ def random_policy(args: argparse.Namespace) -> Policy:
     return lambda env, obs, info: rng.randrange(env.action_space.n)
 
 
+def agent_policy(args: argparse.Namespace) -> Policy:
+    """A trained network from --checkpoint (a run folder or a .pt file), near-greedy."""
+    from dqn_mine.agent.policy import AgentPolicy
+
+    return AgentPolicy.from_checkpoint(args.checkpoint, epsilon=args.epsilon, seed=args.seed)
+
+
 POLICIES: dict[str, Callable[[argparse.Namespace], Policy]] = {
     "expert": expert_policy,
     "random": random_policy,
+    "agent": agent_policy,
 }
+
+# Environment settings play takes from a checkpoint's config unless given on the command line.
+ENV_DEFAULTS = {"task": "rooms", "room_size": 16.0, "placement": "fixed", "num_rooms": None,
+                "max_steps": None}
+CONFIG_KEYS = {"task": "task", "room_size": "room_size", "placement": "placement",
+               "num_rooms": "num_rooms", "max_steps": "max_episode_steps"}
+
+
+def fill_env_settings(args: argparse.Namespace) -> None:
+    """Unset environment flags take the checkpoint's training settings, else the defaults."""
+    trained = {}
+    if args.checkpoint:
+        from dqn_mine.system import checkpoint as ckpt
+
+        trained = ckpt.load(args.checkpoint)["config"]
+    for name, default in ENV_DEFAULTS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, trained.get(CONFIG_KEYS[name], default))
+    if args.task != "rooms":
+        args.num_rooms = None
 
 
 def make_env(args: argparse.Namespace):
@@ -82,11 +110,15 @@ def save_gif(frames: list[np.ndarray], path: Path, fps: float) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--policy", choices=sorted(POLICIES), default="expert", help="who acts")
-    ap.add_argument("--task", default="rooms", help="one-room, two-room, three-room or rooms")
+    ap.add_argument("--policy", choices=sorted(POLICIES), default=None,
+                    help="who acts (default: agent with --checkpoint, else expert)")
+    ap.add_argument("--checkpoint", default=None,
+                    help="trained agent: a run folder or checkpoint.pt (its task is the default)")
+    ap.add_argument("--epsilon", type=float, default=0.0, help="agent's exploration rate")
+    ap.add_argument("--task", default=None, help="one-room, two-room, three-room or rooms")
     ap.add_argument("--num-rooms", type=int, default=None, help="rooms of the `rooms` task (default 4)")
-    ap.add_argument("--room-size", type=float, default=16.0, help="side of each room in units")
-    ap.add_argument("--placement", default="fixed", help="fixed or any-room (domain randomisation)")
+    ap.add_argument("--room-size", type=float, default=None, help="side of each room in units")
+    ap.add_argument("--placement", default=None, help="fixed or any-room (domain randomisation)")
     ap.add_argument("--phase", type=int, default=None, help="three-room curriculum phase 1..6")
     ap.add_argument("--seed", type=int, default=0, help="episode seed")
     ap.add_argument("--max-steps", type=int, default=None, help="step limit (default: the task's)")
@@ -98,13 +130,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    args.policy = args.policy or ("agent" if args.checkpoint else "expert")
+    if args.policy == "agent" and not args.checkpoint:
+        print("error: --policy agent needs --checkpoint RUN_DIR", file=sys.stderr)
+        return 2
     out = Path(args.out or f"runs/play/{args.policy}.gif")
     try:
+        fill_env_settings(args)
         env = make_env(args)
-    except ValueError as exc:
+        policy = POLICIES[args.policy](args)
+    except ValueError as exc:  # bad settings, or CheckpointError (a ValueError)
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    policy = POLICIES[args.policy](args)
     frames, total, steps = record(env, policy, args.seed, progress=not args.quiet)
     env.close()
     save_gif(frames, out, args.fps)

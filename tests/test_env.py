@@ -284,6 +284,10 @@ def test_pick_up_and_drop(envs):
     c, s = env.direction
     ahead = AGENT_RADIUS + kit.radius + 0.1
     assert (kit.x, kit.z) == pytest.approx((env.agent_x + ahead * c, env.agent_z + ahead * s))
+    # Dropped right at the agent's feet it is below the camera's view; a step back shows it
+    # drawn at its new place.
+    for _ in range(3):
+        obs, *_ = env.step(BACKWARD)
     assert _red_pixels(obs) > 0
 
 

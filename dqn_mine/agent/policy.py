@@ -1,0 +1,60 @@
+"""A trained agent acting in one environment (for `python -m dqn_mine.play --checkpoint`).
+
+It feeds the network exactly what the actors fed it during training: the last ``frame_stack``
+frames (zeros before the episode start), the last ``history_len`` actions (oldest first, -1 =
+none) and the carrying flag.
+"""
+
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+import torch
+
+from dqn_mine.agent.network import DuelingQNetwork
+
+
+class AgentPolicy:
+    """``policy(env, obs, info) -> action``; call :meth:`reset` at each episode start."""
+
+    def __init__(self, net: DuelingQNetwork, frame_stack: int, history_len: int,
+                 epsilon: float = 0.0, seed: int = 0):
+        self.net = net.eval()
+        self.frame_stack, self.history_len = frame_stack, history_len
+        self.epsilon = epsilon
+        self.rng = np.random.default_rng(seed)
+        self.stack: Optional[np.ndarray] = None           # uint8 [3f, H, W]
+        self.history = np.full(history_len, -1, dtype=np.int8)
+
+    @classmethod
+    def from_checkpoint(cls, path, epsilon: float = 0.0, seed: int = 0) -> "AgentPolicy":
+        """Raises CheckpointError (one line) for a missing or corrupt checkpoint."""
+        from dqn_mine.system import checkpoint as ckpt
+
+        state = ckpt.load(path)
+        cfg = state["config"]
+        net = DuelingQNetwork(frame_stack=cfg["frame_stack"], history_len=cfg["history_len"])
+        net.load_state_dict(state["updater"]["online"])
+        return cls(net, cfg["frame_stack"], cfg["history_len"], epsilon, seed)
+
+    def reset(self) -> None:
+        self.stack = None
+        self.history[:] = -1
+
+    def __call__(self, env, obs: np.ndarray, info: dict) -> int:
+        if self.stack is None:
+            self.stack = np.zeros((self.frame_stack * obs.shape[0], *obs.shape[1:]), np.uint8)
+        c = obs.shape[0]
+        self.stack[:-c] = self.stack[c:]
+        self.stack[-c:] = obs
+        with torch.inference_mode():
+            q = self.net(torch.from_numpy(self.stack[None]), torch.from_numpy(self.history[None]),
+                         torch.tensor([float(info["carrying"])]))[0]   # [A]
+        action = int(q.argmax())
+        if self.rng.random() < self.epsilon:
+            action = int(self.rng.integers(q.numel()))
+        if self.history_len:
+            self.history[:-1] = self.history[1:]
+            self.history[-1] = action
+        return action

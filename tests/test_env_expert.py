@@ -1,0 +1,108 @@
+"""Solvability (the scripted expert), curriculum phase starts and any-room coverage."""
+
+from __future__ import annotations
+
+import math
+import statistics
+
+import pytest
+
+from dqn_mine.env import MineRescueEnv
+from dqn_mine.env.entities import BOULDER
+from dqn_mine.env.tasks import PHASES
+
+SOLVE_CONFIGS = [
+    dict(task="one-room"),
+    dict(task="two-room"),
+    dict(task="three-room"),
+    dict(task="rooms", num_rooms=2),
+    dict(task="rooms", num_rooms=4),
+    dict(task="two-room", placement="any-room"),
+    dict(task="three-room", placement="any-room"),
+    dict(task="rooms", num_rooms=5, placement="any-room"),
+    dict(task="one-room", room_size=8.0, max_episode_steps=200),  # the smoke preset's task
+]
+IDS = ["-".join(str(v) for v in c.values()) for c in SOLVE_CONFIGS]
+
+
+def expert_episode(env: MineRescueEnv, seed: int) -> tuple:
+    """(return, steps) of one expert episode."""
+    env.reset(seed=seed)
+    total, steps = 0.0, 0
+    while True:
+        _, reward, terminated, truncated, _ = env.step(env.expert_action())
+        total += reward
+        steps += 1
+        if terminated or truncated:
+            return total, steps
+
+
+def open_doorways(env: MineRescueEnv) -> list:
+    """Per door in chain order: is no boulder standing in its opening?"""
+    boulders = [e for e in env.world_entities() if e.kind == BOULDER]
+    return [all(math.dist((b.x, b.z), door.center) > door.width / 2 for b in boulders)
+            for door in env.layout.doors]
+
+
+def solve_rate(config: dict, seeds: range) -> tuple:
+    env = MineRescueEnv(**config)
+    results = [expert_episode(env, s) for s in seeds]
+    env.close()
+    solved = [steps for ret, steps in results if ret == 1.0]
+    return len(solved) / len(results), solved, env.max_episode_steps
+
+
+@pytest.mark.parametrize("config", SOLVE_CONFIGS, ids=IDS)
+def test_expert_solves_every_task_within_the_step_limit(config):
+    rate, steps, limit = solve_rate(config, range(12))
+    assert rate >= 11 / 12, f"expert solved only {rate:.0%}"
+    assert max(steps) < limit
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("config", SOLVE_CONFIGS, ids=IDS)
+def test_expert_solves_nearly_all_of_100_episodes(config):
+    rate, _, _ = solve_rate(config, range(1000, 1100))
+    assert rate >= 0.97, f"expert solved only {rate:.0%}"
+
+
+@pytest.mark.parametrize("phase", sorted(PHASES))
+def test_phase_starts_as_specified(phase):
+    env = MineRescueEnv(task="three-room", phase=phase)
+    want = PHASES[phase]
+    for seed in range(5):
+        _, info = env.reset(seed=seed)
+        assert info["agent_room"] == want.agent_room
+        assert info["miner_room"] == 0
+        assert info["carrying_kit"] == want.carrying_kit == info["carrying"]
+        if not want.carrying_kit:
+            assert info["kit_room"] == 2
+        # Boulders moved aside leave their doorways open: the chain's first k doors are clear.
+        assert open_doorways(env) == [True] * want.boulders_aside + \
+            [False] * (2 - want.boulders_aside)
+    env.close()
+
+
+def test_harder_phases_need_more_expert_steps():
+    """Phase 6 (carrying the kit next to the miner) is easiest, phase 1 the full task."""
+    means = {}
+    for phase in sorted(PHASES):
+        env = MineRescueEnv(task="three-room", phase=phase)
+        means[phase] = statistics.mean(expert_episode(env, s)[1] for s in range(8))
+        env.close()
+    order = [means[p] for p in sorted(PHASES, reverse=True)]   # 6, 5, ..., 1
+    assert order == sorted(order), means
+
+
+@pytest.mark.parametrize("config", [dict(task="two-room"), dict(task="three-room"),
+                                    dict(task="rooms", num_rooms=4)])
+def test_any_room_placement_covers_every_room(config):
+    env = MineRescueEnv(placement="any-room", **config)
+    seen = {"agent_room": set(), "kit_room": set(), "miner_room": set()}
+    for seed in range(120):
+        _, info = env.reset(seed=seed)
+        for key in seen:
+            seen[key].add(info[key])
+    rooms = set(range(info["num_rooms"]))
+    assert all(found == rooms for found in seen.values()), seen
+    env.close()

@@ -1,0 +1,60 @@
+"""`python -m dqn_mine.play`: GIFs of the expert, a random policy and a trained checkpoint."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+from PIL import Image
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def play(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "dqn_mine.play", "--quiet", *args], cwd=ROOT,
+                          capture_output=True, text=True, timeout=300)
+
+
+def gif_frames(path: Path) -> tuple:
+    with Image.open(path) as gif:
+        return gif.n_frames, gif.size
+
+
+def test_expert_gif_shows_first_person_and_map(tmp_path):
+    out = tmp_path / "expert.gif"
+    res = play("--policy", "expert", "--task", "two-room", "--seed", "1", "--out", str(out))
+    assert res.returncode == 0, res.stderr
+    assert "return 1.0" in res.stdout
+    frames, (width, height) = gif_frames(out)
+    assert frames > 10 and width > 2 * height   # first-person view and map side by side
+
+
+def test_random_policy_respects_step_limit(tmp_path):
+    out = tmp_path / "random.gif"
+    res = play("--policy", "random", "--task", "one-room", "--max-steps", "25", "--out", str(out))
+    assert res.returncode == 0, res.stderr
+    assert gif_frames(out)[0] <= 26
+
+
+def test_checkpoint_agent_plays_its_training_task(tmp_path):
+    run_dir = tmp_path / "run"
+    train = subprocess.run(
+        [sys.executable, "-m", "dqn_mine.train", "--preset", "smoke", "--serial", "--actors", "1",
+         "--updates", "20", "--prefill", "100", "--replay-capacity", "2048", "--no-progress",
+         "--run-dir", str(run_dir)], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert train.returncode == 0, train.stderr[-2000:]
+    out = tmp_path / "agent.gif"
+    res = play("--checkpoint", str(run_dir), "--max-steps", "30", "--out", str(out))
+    assert res.returncode == 0, res.stderr
+    assert "agent on one-room" in res.stdout     # the task came from the checkpoint's config
+    assert gif_frames(out)[0] >= 2
+
+
+def test_corrupt_checkpoint_is_one_line(tmp_path):
+    bad = tmp_path / "checkpoint.pt"
+    bad.write_bytes(b"not a checkpoint")
+    res = play("--checkpoint", str(bad), "--out", str(tmp_path / "x.gif"))
+    assert res.returncode == 2
+    assert len(res.stderr.strip().splitlines()) == 1 and "checkpoint" in res.stderr
+    assert not (tmp_path / "x.gif").exists()
