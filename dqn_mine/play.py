@@ -1,6 +1,6 @@
 """`python -m dqn_mine.play`: record one episode of a policy to a GIF (first-person view + map).
 
-    python -m dqn_mine.play --policy expert --task rooms --num-rooms 4 --seed 0 --out runs/play/expert.gif
+    python -m dqn_mine.play --policy expert --task rooms --num-rooms 4 --out runs/play/expert.gif
 
 A policy is a callable ``policy(env, obs, info) -> action``; ``POLICIES`` maps a name to a factory
 ``factory(args) -> policy`` so that new kinds (a trained checkpoint) plug in by adding one entry.
@@ -65,22 +65,24 @@ def fill_env_settings(args: argparse.Namespace) -> None:
 
 
 def make_env(args: argparse.Namespace):
-    import gymnasium as gym
+    """The environment, built directly: ``gymnasium.make`` keeps ``max_episode_steps`` for its own
+    TimeLimit wrapper and never passes it on, so the task's default limit would still cut a longer
+    --max-steps short."""
+    from dqn_mine.env import MineRescueEnv
 
-    import dqn_mine  # noqa: F401  (registers the environment)
-    from dqn_mine.env import ENV_ID
-
-    kwargs = dict(task=args.task, placement=args.placement, room_size=args.room_size, render_mode="rgb_array")
+    kwargs = dict(task=args.task, placement=args.placement, room_size=args.room_size,
+                  render_mode="rgb_array")
     if args.num_rooms is not None:
         kwargs["num_rooms"] = args.num_rooms
     if args.phase is not None:
         kwargs["phase"] = args.phase
     if args.max_steps is not None:
         kwargs["max_episode_steps"] = args.max_steps
-    return gym.make(ENV_ID, disable_env_checker=True, **kwargs)
+    return MineRescueEnv(**kwargs)
 
 
-def record(env, policy: Policy, seed: int, progress: bool = True) -> tuple[list[np.ndarray], float, int]:
+def record(env, policy: Policy, seed: int,
+           progress: bool = True) -> tuple[list[np.ndarray], float, int]:
     """Run one episode; return its rendered frames, its return and its length."""
     from tqdm import tqdm
 
@@ -105,18 +107,21 @@ def save_gif(frames: list[np.ndarray], path: Path, fps: float) -> None:
 
     path.parent.mkdir(parents=True, exist_ok=True)
     images = [Image.fromarray(f) for f in frames]
-    images[0].save(path, save_all=True, append_images=images[1:], duration=max(1, round(1000 / fps)), loop=0)
+    images[0].save(path, save_all=True, append_images=images[1:],
+                   duration=max(1, round(1000 / fps)), loop=0)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--policy", choices=sorted(POLICIES), default=None,
                     help="who acts (default: agent with --checkpoint, else expert)")
     ap.add_argument("--checkpoint", default=None,
                     help="trained agent: a run folder or checkpoint.pt (its task is the default)")
     ap.add_argument("--epsilon", type=float, default=0.0, help="agent's exploration rate")
     ap.add_argument("--task", default=None, help="one-room, two-room, three-room or rooms")
-    ap.add_argument("--num-rooms", type=int, default=None, help="rooms of the `rooms` task (default 4)")
+    ap.add_argument("--num-rooms", type=int, default=None,
+                    help="rooms of the `rooms` task (default 4)")
     ap.add_argument("--room-size", type=float, default=None, help="side of each room in units")
     ap.add_argument("--placement", default=None, help="fixed or any-room (domain randomisation)")
     ap.add_argument("--phase", type=int, default=None, help="three-room curriculum phase 1..6")
@@ -145,7 +150,8 @@ def main(argv: list[str] | None = None) -> int:
     frames, total, steps = record(env, policy, args.seed, progress=not args.quiet)
     env.close()
     save_gif(frames, out, args.fps)
-    print(f"{args.policy} on {args.task} (seed {args.seed}): return {total:.1f} in {steps} steps -> {out}")
+    print(f"{args.policy} on {args.task} (seed {args.seed}): "
+          f"return {total:.1f} in {steps} steps -> {out}")
     return 0
 
 

@@ -20,7 +20,7 @@ from experiments.grid import CLOSE, Claim, Grid
 CURVES = (  # (file, x, y or None for the grid's metric, what it shows)
     ("return_vs_updates.png", "update", None, "against network updates"),
     ("return_vs_wall_time.png", "wall_time", None, "against wall time"),
-    ("episode_length.png", "update", "episode_length", "episode length"),
+    ("episode_length.png", "update", "episode_length", "against network updates"),
 )
 
 

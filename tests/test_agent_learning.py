@@ -2,7 +2,6 @@
 values computed by hand. Q-functions are tiny lookup tables: Q(s, .) = table[s], with the state id
 s carried in obs[:, 0, 0, 0]."""
 
-from typing import NamedTuple
 
 import numpy as np
 import pytest
@@ -12,22 +11,9 @@ from torch import nn
 from dqn_mine.agent.learning import (DQNUpdater, TensorBatch, batch_to_device, double_dqn_target,
                                      epsilon_for_actor, epsilon_greedy, nstep_return, td_loss)
 from dqn_mine.agent.network import DuelingQNetwork
+from dqn_mine.replay import Batch
 
 GAMMA = 0.9
-
-
-class Batch(NamedTuple):  # the replay's batch, as numpy arrays (local copy: replay is separate)
-    obs: np.ndarray
-    history: np.ndarray
-    carrying: np.ndarray
-    action: np.ndarray
-    ret: np.ndarray
-    discount: np.ndarray
-    next_obs: np.ndarray
-    next_history: np.ndarray
-    next_carrying: np.ndarray
-    weights: np.ndarray
-    indices: np.ndarray
 
 
 class TableQ(nn.Module):

@@ -51,7 +51,8 @@ def get(envs, config):
 def face(env, x, z, target_x, target_z):
     """Put the agent at (x, z) looking (to within one heading) at the target."""
     env.agent_x, env.agent_z = x, z
-    env.heading = round(math.atan2(target_z - z, target_x - x) / (2 * math.pi / HEADINGS)) % HEADINGS
+    env.heading = (round(math.atan2(target_z - z, target_x - x) / (2 * math.pi / HEADINGS))
+                   % HEADINGS)
 
 
 def stand_before(env, entity, gap=0.3, angle=None):
@@ -133,8 +134,8 @@ def test_same_seed_same_frames(envs, config):
 
 def _fingerprint(env):
     lay = env.layout
-    return (tuple(lay.rooms), tuple(lay.doors), round(env.agent_x, 6), round(env.agent_z, 6), env.heading,
-            tuple((e.kind, round(e.x, 6), round(e.z, 6)) for e in env.entities))
+    return (tuple(lay.rooms), tuple(lay.doors), round(env.agent_x, 6), round(env.agent_z, 6),
+            env.heading, tuple((e.kind, round(e.x, 6), round(e.z, 6)) for e in env.entities))
 
 
 @pytest.mark.parametrize("config", CONFIGS, ids=IDS)
@@ -155,7 +156,8 @@ def test_rooms_never_overlap_and_all_reachable(envs, config):
         rooms, doors = env.layout.rooms, env.layout.doors
         assert len(rooms) == info["num_rooms"] == config.get("num_rooms", len(rooms))
         for i, a in enumerate(rooms):
-            assert math.isclose(a.x1 - a.x0, env.room_size) and math.isclose(a.z1 - a.z0, env.room_size)
+            assert (math.isclose(a.x1 - a.x0, env.room_size)
+                    and math.isclose(a.z1 - a.z0, env.room_size))
             for b in rooms[i + 1:]:
                 inter_x = min(a.x1, b.x1) - max(a.x0, b.x0)
                 inter_z = min(a.z1, b.z1) - max(a.z0, b.z0)
@@ -186,13 +188,16 @@ def test_nothing_spawns_inside_anything(envs, config):
             assert env.layout.fits(e.x, e.z, e.radius), f"seed {seed}: {e} inside a wall"
         for i, a in enumerate(world):
             for b in world[i + 1:]:
-                assert math.hypot(a.x - b.x, a.z - b.z) >= a.radius + b.radius, f"seed {seed}: {a} in {b}"
+                gap = math.hypot(a.x - b.x, a.z - b.z)
+                assert gap >= a.radius + b.radius, f"seed {seed}: {a} in {b}"
         assert env.agent_fits(env.agent_x, env.agent_z), f"seed {seed}: agent inside something"
-        assert env.room_of(env.kit) == info["kit_room"] and env.room_of(env.miner) == info["miner_room"]
+        assert env.room_of(env.kit) == info["kit_room"]
+        assert env.room_of(env.miner) == info["miner_room"]
         assert env.agent_room == info["agent_room"]
         boulders = [e for e in world if e.kind == BOULDER]
         if config["task"] != "one-room":  # every doorway starts blocked by a boulder at its centre
-            assert sorted((b.x, b.z) for b in boulders) == sorted(d.center for d in env.layout.doors)
+            assert (sorted((b.x, b.z) for b in boulders)
+                    == sorted(d.center for d in env.layout.doors))
 
 
 # --- physics -----------------------------------------------------------------------------------
@@ -211,7 +216,8 @@ def test_random_walk_never_passes_walls_or_entities(envs, config):
         assert not env.layout.crosses_wall(x, z, env.agent_x, env.agent_z)
         assert env.agent_fits(env.agent_x, env.agent_z)
         moved = math.hypot(env.agent_x - x, env.agent_z - z)
-        assert moved == pytest.approx(0.5) if action in (FORWARD, BACKWARD) and moved else moved == 0
+        assert (moved == pytest.approx(0.5) if action in (FORWARD, BACKWARD) and moved
+                else moved == 0)
 
 
 def test_walls_stop_the_agent(envs):
@@ -236,7 +242,8 @@ def test_boulder_blocks_doorway_and_the_agent(envs):
         stand_before(env, boulder, gap=1.0)
         for _ in range(10):
             env.step(FORWARD)
-        assert math.hypot(env.agent_x - boulder.x, env.agent_z - boulder.z) >= AGENT_RADIUS + boulder.radius
+        assert (math.hypot(env.agent_x - boulder.x, env.agent_z - boulder.z)
+                >= AGENT_RADIUS + boulder.radius)
         for _ in range(1500):  # without action 4 nobody leaves room 0
             env.step(rng.choice([FORWARD] * 3 + [BACKWARD, RIGHT, LEFT, NOOP]))
             assert env.agent_room == 0
@@ -253,7 +260,8 @@ def test_turns_are_nine_degrees_and_steps_half_a_unit(envs):
     room = env.layout.rooms[0]
     env.agent_x, env.agent_z, env.heading = room.center[0], room.center[1], 0
     env.step(RIGHT)
-    assert env.heading == 1 and env.direction == pytest.approx((math.cos(math.radians(9)), math.sin(math.radians(9))))
+    assert env.heading == 1
+    assert env.direction == pytest.approx((math.cos(math.radians(9)), math.sin(math.radians(9))))
     env.step(LEFT)
     env.step(LEFT)
     assert env.heading == HEADINGS - 1
@@ -297,7 +305,8 @@ def test_drop_needs_room(envs):
     stand_before(env, env.kit)
     env.step(INTERACT)
     room = env.layout.rooms[0]
-    env.agent_x, env.agent_z, env.heading = room.x1 - AGENT_RADIUS - 0.05, room.center[1], 0  # nose to a wall
+    # nose to a wall
+    env.agent_x, env.agent_z, env.heading = room.x1 - AGENT_RADIUS - 0.05, room.center[1], 0
     if not env.agent_fits(env.agent_x, env.agent_z):
         env.agent_z = room.z0 + 1.0
     _, _, _, _, info = env.step(INTERACT)
@@ -433,14 +442,16 @@ def test_missing_egl_is_one_clear_line(tmp_path):
     env = dict(os.environ, __EGL_VENDOR_LIBRARY_FILENAMES=str(tmp_path / "none.json"),
                __EGL_VENDOR_LIBRARY_DIRS=str(tmp_path))
     code = "from dqn_mine.env import MineRescueEnv; MineRescueEnv(task='one-room').reset(seed=0)"
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         timeout=60)
     assert out.returncode != 0
     last = out.stderr.strip().splitlines()[-1]
     assert last.startswith("RuntimeError: cannot initialise headless EGL") and "Mesa" in last
 
 
 def test_env_does_not_import_torch():
-    code = ("import sys, dqn_mine.env.tasks as t; e = t.MineRescueEnv(task='rooms'); e.reset(seed=0); "
+    code = ("import sys, dqn_mine.env.tasks as t; e = t.MineRescueEnv(task='rooms'); "
+            "e.reset(seed=0); "
             "e.step(0); e.expert_action(); e.render_top_down(64); print('torch' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.stdout.strip() == "False", out.stderr

@@ -37,6 +37,25 @@ def test_random_policy_respects_step_limit(tmp_path):
     assert gif_frames(out)[0] <= 26
 
 
+def test_max_steps_above_the_task_default_is_honoured():
+    # In-process and without the GIF: writing ~1000 frames takes far longer than playing them.
+    from dqn_mine.env import TASKS
+    from dqn_mine.play import POLICIES, build_parser, fill_env_settings, make_env, record
+
+    default = TASKS["one-room"].step_limit
+    args = build_parser().parse_args(["--policy", "random", "--task", "one-room", "--seed", "0",
+                                      "--max-steps", str(default + 5)])
+    fill_env_settings(args)
+    env = make_env(args)
+    try:
+        frames, total, steps = record(env, POLICIES["random"](args), args.seed, progress=False)
+    finally:
+        env.close()
+    assert total == 0.0                  # seed 0's random walk never delivers the kit ...
+    assert steps == default + 5          # ... so the episode runs to the requested limit
+    assert len(frames) == steps + 1
+
+
 def test_checkpoint_agent_plays_its_training_task(tmp_path):
     run_dir = tmp_path / "run"
     train = subprocess.run(

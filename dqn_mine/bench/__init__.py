@@ -1,1 +1,4 @@
-"""Benchmarks behind `make bench`. Each module has ``run(quick=False) -> str`` (a markdown section)."""
+"""Benchmarks behind `make bench`.
+
+Each module has ``run(quick=False) -> str`` (a markdown section).
+"""

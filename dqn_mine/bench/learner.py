@@ -2,8 +2,8 @@
 
 - learner: :class:`DQNUpdater` updates/s (forward on s and s', target, backward, Adam) at batch 32
   and 256, for each torch thread count up to the machine's cores, CPU and (when present) CUDA;
-- actor: batched ``inference_mode`` forward passes per second at batch 1, 4, 8 (one env step per
-  row), with one torch thread (what actor processes use).
+- actor: batched ``inference_mode`` forward passes per second at batch 1, 4, 8, 16, 32 (one env
+  step per row), with one torch thread (what actor processes use).
 
 `python -m dqn_mine.bench --only learner [--quick]`.
 """
@@ -12,34 +12,21 @@ from __future__ import annotations
 
 import os
 import time
-from typing import Callable, List, NamedTuple
+from typing import Callable, List
 
 import numpy as np
 import torch
 
 from dqn_mine.agent.learning import DQNUpdater, batch_to_device
 from dqn_mine.agent.network import DuelingQNetwork
+from dqn_mine.replay import Batch
 
 
-class _Batch(NamedTuple):
-    obs: np.ndarray
-    history: np.ndarray
-    carrying: np.ndarray
-    action: np.ndarray
-    ret: np.ndarray
-    discount: np.ndarray
-    next_obs: np.ndarray
-    next_history: np.ndarray
-    next_carrying: np.ndarray
-    weights: np.ndarray
-    indices: np.ndarray
-
-
-def synthetic_batch(b: int, history_len: int = 20, seed: int = 0) -> _Batch:
+def synthetic_batch(b: int, history_len: int = 20, seed: int = 0) -> Batch:
     rng = np.random.default_rng(seed)
     frames = lambda: rng.integers(0, 256, (b, 3, 44, 76), dtype=np.uint8)  # noqa: E731
     hist = lambda: rng.integers(-1, 6, (b, history_len)).astype(np.int8)  # noqa: E731
-    return _Batch(frames(), hist(), np.zeros(b, np.float32), rng.integers(0, 6, b),
+    return Batch(frames(), hist(), np.zeros(b, np.float32), rng.integers(0, 6, b),
                   rng.random(b).astype(np.float32), np.full(b, 0.99 ** 6, np.float32),
                   frames(), hist(), np.zeros(b, np.float32), np.ones(b, np.float32),
                   np.arange(b))
@@ -142,7 +129,7 @@ def run(quick: bool = False) -> str:
         lines += ["## Actor network (batched inference, 1 torch thread)\n",
                   "| envs per forward | forwards/s | env steps/s | ms/forward |",
                   "|---|---|---|---|"]
-        for b in (1, 4, 8):
+        for b in (1, 4, 8, 16, 32):
             r = inference_rate(b, seconds)
             lines.append(f"| {b} | {r:.0f} | {r * b:.0f} | {1000 / r:.2f} |")
     finally:

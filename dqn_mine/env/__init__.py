@@ -9,8 +9,10 @@ ENV_ID = "dqn_mine/MineRescue-v0"
 def register_envs() -> None:
     """Register ``dqn_mine/MineRescue-v0`` with gymnasium (idempotent).
 
-    No ``max_episode_steps`` here: the environment truncates itself, so ``gymnasium.make(ENV_ID,
-    max_episode_steps=...)`` reaches the environment and the raw class behaves like the made one.
+    No ``max_episode_steps`` here: the environment truncates itself at its task's limit, so the
+    made environment behaves like the raw class. Note that ``gymnasium.make`` keeps a
+    ``max_episode_steps`` keyword for its own TimeLimit wrapper instead of passing it on, so it can
+    only shorten the task's limit; to lengthen it, construct ``MineRescueEnv(max_episode_steps=N)``.
     """
     import gymnasium
 

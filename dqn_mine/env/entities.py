@@ -53,7 +53,8 @@ class Entity:
 
     def vertices(self) -> np.ndarray:
         """This entity's triangles in world coordinates."""
-        return mesh.place(local_mesh(self.kind), self.x, self.z, math.cos(self.yaw), math.sin(self.yaw))
+        return mesh.place(local_mesh(self.kind), self.x, self.z,
+                          math.cos(self.yaw), math.sin(self.yaw))
 
 
 @lru_cache(maxsize=None)

@@ -163,7 +163,8 @@ class Expert:
 
     def _aside_ok(self, item: Entity, x: float, z: float) -> bool:
         env = self.env
-        far = all(math.hypot(x - d.center[0], z - d.center[1]) >= ASIDE_CLEARANCE for d in env.layout.doors)
+        far = all(math.hypot(x - d.center[0], z - d.center[1]) >= ASIDE_CLEARANCE
+                  for d in env.layout.doors)
         return (far and env.item_fits(item, x, z)
                 and not env.layout.crosses_wall(env.agent_x, env.agent_z, x, z))
 
@@ -174,7 +175,8 @@ class Expert:
         best, best_d = None, math.inf
         for (i, j) in grid.free:
             x, z = grid.center(i, j)
-            if all(math.hypot(x - d.center[0], z - d.center[1]) >= ASIDE_CLEARANCE + 2.0 for d in env.layout.doors):
+            if all(math.hypot(x - d.center[0], z - d.center[1]) >= ASIDE_CLEARANCE + 2.0
+                   for d in env.layout.doors):
                 dist = math.hypot(x - env.agent_x, z - env.agent_z)
                 if dist < best_d:
                     best, best_d = (x, z), dist
@@ -270,7 +272,8 @@ class _Grid:
         self.x0, self.z0 = m.x0, m.z0
         self.nx, self.nz = int((m.x1 - m.x0) / CELL), int((m.z1 - m.z0) / CELL)
         self.obstacles = [(e.x, e.z, e.radius) for e in env.world_entities()]
-        self.free = {(i, j) for i in range(self.nx) for j in range(self.nz) if self.clear(*self.center(i, j))}
+        self.free = {(i, j) for i in range(self.nx) for j in range(self.nz)
+                     if self.clear(*self.center(i, j))}
 
     def center(self, i: int, j: int) -> tuple[float, float]:
         return self.x0 + (i + 0.5) * CELL, self.z0 + (j + 0.5) * CELL

@@ -28,7 +28,8 @@ class Room:
         return (self.x0 + self.x1) / 2, (self.z0 + self.z1) / 2
 
     def contains(self, x: float, z: float, margin: float = 0.0) -> bool:
-        return (self.x0 + margin <= x <= self.x1 - margin) and (self.z0 + margin <= z <= self.z1 - margin)
+        return ((self.x0 + margin <= x <= self.x1 - margin)
+                and (self.z0 + margin <= z <= self.z1 - margin))
 
     def overlaps(self, other: "Room") -> bool:
         """True when the interiors intersect (sharing a wall is fine)."""

@@ -68,13 +68,16 @@ _CUBE_FACES = np.array([
     [[-.5, -.5, 0.5], [0.5, -.5, 0.5], [0.5, 0.5, 0.5], [-.5, 0.5, 0.5]],   # +z
     [[0.5, -.5, -.5], [-.5, -.5, -.5], [-.5, 0.5, -.5], [0.5, 0.5, -.5]],   # -z
 ])
-_CUBE_NORMALS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+_CUBE_NORMALS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]],
+                         float)
 
 
 def boxes(centers, sizes, colours, material: float = PLAIN) -> np.ndarray:
     """Axis-aligned boxes, centers/sizes/colours (B, 3) -> vertices (36B, 7), faces lit."""
-    centers, sizes, colours = (np.asarray(a, float).reshape(-1, 3) for a in (centers, sizes, colours))
-    corners = centers[:, None, None, :] + _CUBE_FACES[None] * sizes[:, None, None, :]  # [B, 6, 4, 3]
+    centers, sizes, colours = (np.asarray(a, float).reshape(-1, 3)
+                               for a in (centers, sizes, colours))
+    # [B, 6, 4, 3]
+    corners = centers[:, None, None, :] + _CUBE_FACES[None] * sizes[:, None, None, :]
     shade = _lambert(_CUBE_NORMALS)  # [6]
     cols = colours[:, None, None, :] * shade[None, :, None, None]  # [B, 6, 1, 3]
     cols = np.broadcast_to(cols, corners.shape)
@@ -124,7 +127,8 @@ def _door_frames(layout: Layout, door_height: float) -> np.ndarray:
     post, depth, beam = 0.22, 0.30, 0.22
     centers, sizes = [], []
     for d in layout.doors:
-        along = [(d.lo - post / 2, post), (d.hi + post / 2, post), ((d.lo + d.hi) / 2, d.width + 2 * post)]
+        along = [(d.lo - post / 2, post), (d.hi + post / 2, post),
+                 ((d.lo + d.hi) / 2, d.width + 2 * post)]
         for k, (c, length) in enumerate(along):
             y, h = ((door_height / 2, door_height) if k < 2 else (door_height + beam / 2, beam))
             if d.vertical:

@@ -15,7 +15,7 @@ import numpy as np
 from gymnasium import spaces
 
 from dqn_mine.env import mesh
-from dqn_mine.env.entities import BOULDER, KINDS, KIT, MINER, Entity
+from dqn_mine.env.entities import BOULDER, KIT, MINER, Entity
 from dqn_mine.env.layout import Door, Layout, generate_layout
 
 OBS_HEIGHT, OBS_WIDTH = 44, 76
@@ -38,7 +38,8 @@ _COS = [math.cos(2 * math.pi * k / HEADINGS) for k in range(HEADINGS)]
 _SIN = [math.sin(2 * math.pi * k / HEADINGS) for k in range(HEADINGS)]
 
 FORWARD, BACKWARD, TURN_RIGHT, TURN_LEFT, INTERACT, NOOP = range(6)
-ACTION_NAMES = ("forward", "backward", "turn right", "turn left", "pick/drop/exchange/deliver", "no-op")
+ACTION_NAMES = ("forward", "backward", "turn right", "turn left", "pick/drop/exchange/deliver",
+                "no-op")
 
 
 class MineEnv(gym.Env):
@@ -50,7 +51,8 @@ class MineEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
 
-    def __init__(self, max_episode_steps: int, room_size: float = 16.0, render_mode: str | None = None):
+    def __init__(self, max_episode_steps: int, room_size: float = 16.0,
+                 render_mode: str | None = None):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.render_mode = render_mode
@@ -88,7 +90,8 @@ class MineEnv(gym.Env):
         self._entities_changed(static=True)
         obs = self._observe()
         info = {"carrying": self.carrying is not None, "carrying_kit": self._carrying_kit(),
-                "agent_room": self.agent_room, "kit_room": self.room_of(self.kit), "miner_room": self.room_of(self.miner),
+                "agent_room": self.agent_room, "kit_room": self.room_of(self.kit),
+                "miner_room": self.room_of(self.miner),
                 "num_rooms": len(self.layout.rooms)}
         return obs, info
 
@@ -111,7 +114,8 @@ class MineEnv(gym.Env):
         self.steps += 1
         truncated = not terminated and self.steps >= self.max_episode_steps
         carrying = self.carrying
-        info = {"carrying": carrying is not None, "carrying_kit": carrying is not None and carrying.kind == KIT}
+        info = {"carrying": carrying is not None,
+                "carrying_kit": carrying is not None and carrying.kind == KIT}
         return self._observe(), (1.0 if terminated else 0.0), terminated, truncated, info
 
     def render(self):
@@ -234,7 +238,8 @@ class MineEnv(gym.Env):
             c, s = _COS[self.heading], _SIN[self.heading]
             ahead = AGENT_RADIUS + held.radius + DROP_GAP
             x, z = self.agent_x + ahead * c, self.agent_z + ahead * s
-            if not self.item_fits(held, x, z) or self.layout.crosses_wall(self.agent_x, self.agent_z, x, z):
+            if (not self.item_fits(held, x, z)
+                    or self.layout.crosses_wall(self.agent_x, self.agent_z, x, z)):
                 return False
             held.x, held.z, held.yaw = x, z, 2 * math.pi * self.heading / HEADINGS
             self.carrying = None
@@ -261,7 +266,8 @@ class MineEnv(gym.Env):
         dynamic = (np.concatenate([e.vertices() for e in world]) if world
                    else np.zeros((0, mesh.VERTEX_FLOATS), np.float32))
         if static:
-            self._scene.set_static(mesh.static_scene(self.layout, WALL_HEIGHT, DOOR_HEIGHT), dynamic)
+            static_mesh = mesh.static_scene(self.layout, WALL_HEIGHT, DOOR_HEIGHT)
+            self._scene.set_static(static_mesh, dynamic)
         else:
             self._scene.set_dynamic(dynamic)
 

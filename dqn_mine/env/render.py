@@ -62,7 +62,8 @@ float hash(vec3 p) {  // cheap value hash (no sin), enough for a rocky grain
 void main() {
     float t = 1.0;
     if (v_mat > 0.5 && v_mat < 1.5) {          // rock: coarse blotches + fine grain
-        t = 0.72 + 0.22 * hash(floor(v_pos * vec3(1.3, 2.1, 1.3))) + 0.10 * hash(floor(v_pos * 5.0));
+        t = 0.72 + 0.22 * hash(floor(v_pos * vec3(1.3, 2.1, 1.3)))
+                 + 0.10 * hash(floor(v_pos * 5.0));
     } else if (v_mat < 2.5 && v_mat > 1.5) {   // floor: gravel
         t = 0.80 + 0.25 * hash(floor(v_pos * 3.0));
     } else if (v_mat < 3.5 && v_mat > 2.5) {   // ceiling
@@ -127,7 +128,8 @@ class Scene:
         self.g = gl(width, height)
         f = 1.0 / math.tan(math.radians(fov_y) / 2)
         near = 0.05
-        self.projection = (f * height / width, f, (far + near) / (near - far), 2 * far * near / (near - far))
+        self.projection = (f * height / width, f,
+                           (far + near) / (near - far), 2 * far * near / (near - far))
         self.eye_height = float(eye_height)
         self.capacity = 0
         self.vbo = None
@@ -145,7 +147,8 @@ class Scene:
             self.capacity = max(need, 2 * self.capacity)
             ctx = self.g.ctx
             self.vbo = ctx.buffer(reserve=self.capacity)
-            self.vao = ctx.vertex_array(self.g.prog, [(self.vbo, VERTEX_FORMAT, "in_pos", "in_col", "in_mat")])
+            self.vao = ctx.vertex_array(
+                self.g.prog, [(self.vbo, VERTEX_FORMAT, "in_pos", "in_col", "in_mat")])
         self.vbo.write(static)
         self.set_dynamic(dynamic)
 

@@ -1,11 +1,11 @@
 """The rescue tasks: where the agent, the kit, the miner and the boulders start.
 
-| task         | rooms       | start (placement="fixed")                             | doorways | steps |
-|--------------|-------------|-------------------------------------------------------|----------|-------|
-| `one-room`   | 1           | agent, kit, miner anywhere in the room                | -        | 1000  |
-| `two-room`   | 2           | agent in room 0; kit and miner in room 1              | blocked  | 1000  |
-| `three-room` | 3 (a chain) | agent and miner in room 0; kit in room 2              | blocked  | 2000  |
-| `rooms`      | N >= 2      | agent, kit, miner each in a random room               | blocked  | 2000  |
+| task         | rooms       | start (placement="fixed")                | doorways | steps |
+|--------------|-------------|------------------------------------------|----------|-------|
+| `one-room`   | 1           | agent, kit, miner anywhere in the room   | -        | 1000  |
+| `two-room`   | 2           | agent in room 0; kit and miner in room 1 | blocked  | 1000  |
+| `three-room` | 3 (a chain) | agent and miner in room 0; kit in room 2 | blocked  | 2000  |
+| `rooms`      | N >= 2      | agent, kit, miner each in a random room  | blocked  | 2000  |
 
 ``placement="any-room"`` (domain randomisation) puts the agent, the kit and the miner each in a
 uniformly random room; the family still contains the fixed task. For ``rooms`` both placements
@@ -118,17 +118,18 @@ DEFAULT_NUM_ROOMS = 4
 class MineRescueEnv(MineEnv):
     """Rescue an injured miner: fetch the first-aid kit, clear boulders, deliver the kit.
 
-    | | |
-    |---|---|
-    | observation | first-person RGB, uint8 (3, 44, 76) |
-    | actions | 0 forward 0.5, 1 backward 0.5, 2 turn right 9 deg, 3 turn left 9 deg, 4 pick up / drop / exchange / deliver, 5 no-op |
-    | reward | 1.0 when the kit is handed to the miner (terminated), else 0.0 |
-    | truncation | after ``max_episode_steps`` steps |
-    | info | ``carrying``, ``carrying_kit``; at reset also ``agent_room``, ``kit_room``, ``miner_room``, ``num_rooms`` |
+    Observation: first-person RGB, uint8 (3, 44, 76).
+    Actions: 0 forward 0.5, 1 backward 0.5, 2 turn right 9 deg, 3 turn left 9 deg,
+        4 pick up / drop / exchange / deliver, 5 no-op.
+    Reward: 1.0 when the kit is handed to the miner (terminated), else 0.0.
+    Truncation: after ``max_episode_steps`` steps.
+    Info: ``carrying``, ``carrying_kit``; at reset also ``agent_room``, ``kit_room``,
+        ``miner_room``, ``num_rooms``.
 
     Args:
         task: "one-room", "two-room", "three-room" or "rooms" (see dqn_mine/env/tasks.py).
-        num_rooms: rooms of the ``rooms`` task (>= 2, default 4); other tasks accept only their own count.
+        num_rooms: rooms of the ``rooms`` task (>= 2, default 4); other tasks accept only their own
+            count.
         room_size: side of each square room in units (>= 8).
         max_episode_steps: step limit; None means the task's default.
         placement: "fixed" or "any-room" (domain randomisation of the start rooms).
@@ -136,22 +137,26 @@ class MineRescueEnv(MineEnv):
         render_mode: None or "rgb_array" (first-person view and map side by side).
     """
 
-    def __init__(self, task: str = "two-room", num_rooms: int | None = None, room_size: float = 16.0,
-                 max_episode_steps: int | None = None, placement: str = "fixed", phase: int | None = None,
+    def __init__(self, task: str = "two-room", num_rooms: int | None = None,
+                 room_size: float = 16.0, max_episode_steps: int | None = None,
+                 placement: str = "fixed", phase: int | None = None,
                  render_mode: str | None = None):
         if task not in TASKS:
             raise ValueError(f"unknown task {task!r}; choose one of {', '.join(TASKS)}")
         spec = TASKS[task]
         self.task = task
         self.num_rooms = _check_rooms(spec, num_rooms)
-        if not isinstance(room_size, numbers.Real) or isinstance(room_size, bool) or not room_size > 0:
+        if (not isinstance(room_size, numbers.Real) or isinstance(room_size, bool)
+                or not room_size > 0):
             raise ValueError(f"room_size must be a positive number, got {room_size!r}")
         if room_size < MIN_ROOM_SIZE:
-            raise ValueError(f"room_size must be at least {MIN_ROOM_SIZE:g} to hold the entities, got {room_size!r}")
+            raise ValueError(f"room_size must be at least {MIN_ROOM_SIZE:g} to hold the entities, "
+                             f"got {room_size!r}")
         if max_episode_steps is None:
             max_episode_steps = spec.step_limit
         if not _is_int(max_episode_steps) or max_episode_steps <= 0:
-            raise ValueError(f"max_episode_steps must be a positive integer, got {max_episode_steps!r}")
+            raise ValueError(
+                f"max_episode_steps must be a positive integer, got {max_episode_steps!r}")
         if placement not in PLACEMENTS:
             raise ValueError(f"placement must be one of {', '.join(PLACEMENTS)}, got {placement!r}")
         self.placement = placement
@@ -176,12 +181,14 @@ def _is_int(value) -> bool:
 def _check_rooms(spec: Task, num_rooms) -> int:
     if spec.rooms is not None:
         if num_rooms is not None and num_rooms != spec.rooms:
-            raise ValueError(f"task {spec.name!r} has exactly {spec.rooms} room(s), got num_rooms={num_rooms!r}")
+            raise ValueError(f"task {spec.name!r} has exactly {spec.rooms} room(s), "
+                             f"got num_rooms={num_rooms!r}")
         return spec.rooms
     if num_rooms is None:
         return DEFAULT_NUM_ROOMS
     if not _is_int(num_rooms) or not 2 <= num_rooms <= MAX_ROOMS:
-        raise ValueError(f"task {spec.name!r} needs an integer num_rooms in 2..{MAX_ROOMS}, got {num_rooms!r}")
+        raise ValueError(f"task {spec.name!r} needs an integer num_rooms in 2..{MAX_ROOMS}, "
+                         f"got {num_rooms!r}")
     return int(num_rooms)
 
 

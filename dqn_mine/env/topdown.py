@@ -41,7 +41,8 @@ def draw_map(env, size: int = 256) -> np.ndarray:
         a, b = (px(wall, lo), px(wall, hi)) if vertical else (px(lo, wall), px(hi, wall))
         draw.line([a, b], fill=WALL, width=wall_w)
     for d in env.layout.doors:  # the opening as a thin orange line between two posts
-        a, b = (px(d.wall, d.lo), px(d.wall, d.hi)) if d.vertical else (px(d.lo, d.wall), px(d.hi, d.wall))
+        a, b = ((px(d.wall, d.lo), px(d.wall, d.hi)) if d.vertical
+                else (px(d.lo, d.wall), px(d.hi, d.wall)))
         draw.line([a, b], fill=DOOR, width=max(1, wall_w // 2))
         r = max(2.0, scale * 0.3)
         for c in (a, b):
@@ -56,7 +57,8 @@ def draw_map(env, size: int = 256) -> np.ndarray:
     r = max(0.4 * scale * grow, 4.0)
     c, s = env.direction
     draw.ellipse([ax - r, az - r, ax + r, az + r], fill=AGENT, outline=(255, 255, 255))
-    draw.line([(ax, az), (ax + c * r * 2.2, az + s * r * 2.2)], fill=(255, 255, 255), width=max(1, round(r / 3)))
+    draw.line([(ax, az), (ax + c * r * 2.2, az + s * r * 2.2)], fill=(255, 255, 255),
+              width=max(1, round(r / 3)))
     if env.carrying is not None:
         _draw_entity(draw, env.carrying.kind, ax, az, r * 0.55)
     return np.asarray(img)

@@ -168,8 +168,8 @@ class MinTree:
         self.levels.append(np.full(1, np.inf, dtype=dtype))
         self._blocks = [lv.reshape(-1, k) for lv in self.levels[:-1]]     # [parents, K]
         # levels with at most 2K nodes are cheaper to recompute whole than to gather
-        self._whole = next(l for l in range(1, len(self.levels))
-                           if self._blocks[l - 1].shape[0] <= self.WHOLE * k)
+        self._whole = next(level for level in range(1, len(self.levels))
+                           if self._blocks[level - 1].shape[0] <= self.WHOLE * k)
 
     @property
     def values(self) -> np.ndarray:
@@ -188,15 +188,15 @@ class MinTree:
         i = np.asarray(indices, dtype=np.int64).ravel()
         self.levels[0][i] = values
         reduce = np.minimum.reduce
-        for l in range(1, len(self.levels)):
-            block = self._blocks[l - 1]
-            if l >= self._whole:
-                reduce(block, axis=1, out=self.levels[l][: block.shape[0]])
+        for level in range(1, len(self.levels)):
+            block = self._blocks[level - 1]
+            if level >= self._whole:
+                reduce(block, axis=1, out=self.levels[level][: block.shape[0]])
             else:
                 i = i // self.ARITY
-                self.levels[l][i] = reduce(block.take(i, axis=0), axis=1)       # [B, K] -> [B]
+                self.levels[level][i] = reduce(block.take(i, axis=0), axis=1)   # [B, K] -> [B]
 
     def rebuild(self) -> None:
-        for l in range(1, len(self.levels)):
-            block = self._blocks[l - 1]
-            np.min(block, axis=1, out=self.levels[l][: block.shape[0]])
+        for level in range(1, len(self.levels)):
+            block = self._blocks[level - 1]
+            np.min(block, axis=1, out=self.levels[level][: block.shape[0]])
