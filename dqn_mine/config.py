@@ -28,7 +28,7 @@ PLACEMENTS = ("fixed", "any-room")
 DEVICES = ("auto", "cpu", "cuda")
 EPSILON_SCHEDULES = ("fixed", "apex")
 INIT_PRIORITIES = ("actor", "max")
-CURRICULA = ("none", "phases", "rooms")
+CURRICULA = ("none", "adaptive", "schedule")
 
 
 class ConfigError(ValueError):
@@ -53,11 +53,14 @@ class Config:
     max_episode_steps: Optional[int] = _f(None, "episode step limit (none = the task's default)")
     placement: str = _f("fixed", "where agent, kit and miner start (any-room = domain "
                         "randomisation)", PLACEMENTS)
-    curriculum: str = _f("none", "curriculum: phases (three-room phases 6->1) or rooms (scheduled "
-                         "room counts)", CURRICULA)
+    visual_randomisation: bool = _f(False, "draw light, wall colour and field of view anew each "
+                                    "episode (training actors only)")
+    curriculum: str = _f("none", "adaptive: three-room phases 6->1, one harder when the rolling "
+                         "return passes the threshold; schedule: room counts by share of updates",
+                         CURRICULA)
     curriculum_threshold: float = _f(0.6, "rolling mean return that advances a curriculum phase")
     curriculum_window: int = _f(50, "episodes in the rolling mean that advances the curriculum")
-    rooms_schedule: Tuple[int, ...] = _f((3, 4, 5), "room counts of the rooms curriculum, each "
+    rooms_schedule: Tuple[int, ...] = _f((3, 4, 5), "room counts of the schedule curriculum, each "
                                          "for an equal share of the updates")
     # -- actors ------------------------------------------------------------------------------
     actors: int = _f(7, "number of actor processes")
@@ -239,11 +242,11 @@ def _problems(c: Config) -> List[str]:
         p.append(f"--max-episode-steps must be at least 1, got {c.max_episode_steps}")
     if c.task == "rooms" and c.num_rooms < 2:
         p.append(f"--num-rooms must be at least 2 for the rooms task, got {c.num_rooms}")
-    if c.curriculum == "phases" and c.task != "three-room":
-        p.append(f"--curriculum phases needs --task three-room, got {c.task}")
-    if c.curriculum == "rooms" and (c.task != "rooms" or not c.rooms_schedule
+    if c.curriculum == "adaptive" and c.task != "three-room":
+        p.append(f"--curriculum adaptive needs --task three-room, got {c.task}")
+    if c.curriculum == "schedule" and (c.task != "rooms" or not c.rooms_schedule
                                     or min(c.rooms_schedule) < 2):
-        p.append("--curriculum rooms needs --task rooms and a --rooms-schedule of counts >= 2")
+        p.append("--curriculum schedule needs --task rooms and a --rooms-schedule of counts >= 2")
     return p
 
 

@@ -71,7 +71,7 @@ def make_env(args: argparse.Namespace):
     from dqn_mine.env import MineRescueEnv
 
     kwargs = dict(task=args.task, placement=args.placement, room_size=args.room_size,
-                  render_mode="rgb_array")
+                  render_mode="rgb_array", randomise_visuals=args.visual_randomisation)
     if args.num_rooms is not None:
         kwargs["num_rooms"] = args.num_rooms
     if args.phase is not None:
@@ -125,6 +125,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--room-size", type=float, default=None, help="side of each room in units")
     ap.add_argument("--placement", default=None, help="fixed or any-room (domain randomisation)")
     ap.add_argument("--phase", type=int, default=None, help="three-room curriculum phase 1..6")
+    ap.add_argument("--visual-randomisation", action="store_true",
+                    help="random light, wall colour and field of view")
     ap.add_argument("--seed", type=int, default=0, help="episode seed")
     ap.add_argument("--max-steps", type=int, default=None, help="step limit (default: the task's)")
     ap.add_argument("--fps", type=float, default=15.0, help="frames per second of the GIF")

@@ -30,7 +30,7 @@ def run(*args: str) -> list:
 def test_phases_advance_through_shared_state(tmp_path):
     """A threshold every episode beats moves the phase from 6 to 1; the actors follow it
     (each phase gets its own window of episodes, all started in that phase)."""
-    rows = run("--task", "three-room", "--curriculum", "phases", "--curriculum-window", "2",
+    rows = run("--task", "three-room", "--curriculum", "adaptive", "--curriculum-window", "2",
                "--curriculum-threshold", "-1", "--updates", "400", "--serial",
                "--run-dir", str(tmp_path / "cl"), *FAST)
     phases = [int(r["phase"]) for r in rows]
@@ -39,14 +39,14 @@ def test_phases_advance_through_shared_state(tmp_path):
 
 
 def test_phase_holds_when_returns_stay_below_threshold(tmp_path):
-    rows = run("--task", "three-room", "--curriculum", "phases", "--curriculum-window", "2",
+    rows = run("--task", "three-room", "--curriculum", "adaptive", "--curriculum-window", "2",
                "--curriculum-threshold", "1.0", "--updates", "40",
                "--run-dir", str(tmp_path / "hold"), *FAST)
     assert {int(r["phase"]) for r in rows} == {6}
 
 
 def test_room_schedule_switches_at_the_right_update(tmp_path):
-    rows = run("--task", "rooms", "--curriculum", "rooms", "--rooms-schedule", "2", "3", "4",
+    rows = run("--task", "rooms", "--curriculum", "schedule", "--rooms-schedule", "2", "3", "4",
                "--updates", "90", "--serial", "--run-dir", str(tmp_path / "rooms"), *FAST)
     by_update = {int(r["update"]): int(r["phase"]) for r in rows}
     assert [by_update[u] for u in (10, 20, 30, 40, 60, 70, 80)] == [2, 2, 3, 3, 4, 4, 4]
@@ -69,16 +69,18 @@ def test_evaluation_results_arrive_in_the_metrics(tmp_path):
 
 
 def test_evaluation_actor_runs_the_full_target_task():
-    cfg = parse_args(["--task", "three-room", "--curriculum", "phases", "--placement",
-                      "any-room", "--eval-every", "1000"])
+    cfg = parse_args(["--task", "three-room", "--curriculum", "adaptive", "--placement",
+                      "any-room", "--visual-randomisation", "--eval-every", "1000"])
     specs = actor_specs(cfg)
     evaluator = specs[-1]
     assert len(specs) == cfg.actors + 1 and evaluator.streams == ()
     assert not evaluator.follows_curriculum
     assert evaluator.env_kwargs["placement"] == "fixed" and evaluator.env_kwargs["task"] == \
         "three-room"
+    assert not evaluator.env_kwargs["randomise_visuals"]
+    assert all(s.env_kwargs["randomise_visuals"] for s in specs[:-1])
     assert initial_phase(cfg) == 6
-    rooms = parse_args(["--task", "rooms", "--curriculum", "rooms", "--rooms-schedule", "3", "4",
+    rooms = parse_args(["--task", "rooms", "--curriculum", "schedule", "--rooms-schedule", "3", "4",
                         "5", "--eval-every", "1000"])
     assert eval_env_kwargs(rooms)["num_rooms"] == 5 and initial_phase(rooms) == 3
 

@@ -490,3 +490,45 @@ def test_entities_are_visible_in_first_person(envs):
     stand_before(env, env.miner, gap=2.0)
     r, g, b = (env.step(NOOP)[0][i].astype(int) for i in range(3))
     assert ((r > 150) & (g > 60) & (b < 40)).sum() > 10, "orange vest / yellow helmet in view"
+
+
+def test_visual_randomisation_changes_look_not_layout():
+    """Same seed: the same mine and entities, but a different light, tint and field of view per
+    episode; the same seed with randomisation still reproduces its frames."""
+    plain = MineRescueEnv(task="two-room")
+    varied = MineRescueEnv(task="two-room", randomise_visuals=True)
+    again = MineRescueEnv(task="two-room", randomise_visuals=True)
+    try:
+        looks = []
+        for seed in range(4):
+            obs_p, info_p = plain.reset(seed=seed)
+            obs_v, info_v = varied.reset(seed=seed)
+            assert info_p == info_v
+            assert plain.layout.rooms == varied.layout.rooms
+            assert [(e.kind, e.x, e.z) for e in plain.entities] == \
+                [(e.kind, e.x, e.z) for e in varied.entities]
+            assert not np.array_equal(obs_p, obs_v)
+            np.testing.assert_array_equal(again.reset(seed=seed)[0], obs_v)
+            looks.append((varied.light, *varied.tint, varied.fov_y))
+        assert plain.light == 1.0 and plain.fov_y == 60.0
+        assert len(set(looks)) == 4                              # drawn anew each episode
+        for light, r, g, b, fov in looks:
+            assert 0.6 <= light <= 1.3 and 50.0 <= fov <= 70.0
+            assert all(0.85 <= c <= 1.15 for c in (r, g, b))
+    finally:
+        for env in (plain, varied, again):
+            env.close()
+
+
+def test_dimmer_light_gives_darker_frames():
+    env = MineRescueEnv(task="one-room", randomise_visuals=True)
+    try:
+        means = {}
+        for seed in range(12):
+            obs, _ = env.reset(seed=seed)
+            means[env.light] = obs.mean()
+        dim, bright = min(means), max(means)
+        assert bright - dim > 0.2
+        assert means[dim] < means[bright]
+    finally:
+        env.close()

@@ -33,6 +33,12 @@ DROP_GAP = 0.1                     # space between the agent and an item it puts
 DOOR_CLEARANCE = 2.5               # kit, miner and agent start at least this far from doorways
 ASIDE_CLEARANCE = 3.5              # boulders moved aside lie at least this far from doorways
 MIN_ROOM_SIZE = 8.0
+# Visual randomisation (optional): drawn per episode, after the layout, so a seed gives the same
+# mine with or without it. Entities keep their hue (only the light level touches them), so the
+# kit stays red and the miner stays yellow.
+LIGHT_RANGE = (0.6, 1.3)           # overall light level
+TINT_RANGE = (0.85, 1.15)          # per-channel colour of walls, floor and ceiling
+FOV_RANGE = (50.0, 70.0)           # vertical field of view, degrees
 
 _COS = [math.cos(2 * math.pi * k / HEADINGS) for k in range(HEADINGS)]
 _SIN = [math.sin(2 * math.pi * k / HEADINGS) for k in range(HEADINGS)]
@@ -52,12 +58,14 @@ class MineEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
 
     def __init__(self, max_episode_steps: int, room_size: float = 16.0,
-                 render_mode: str | None = None):
+                 render_mode: str | None = None, randomise_visuals: bool = False):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.render_mode = render_mode
         self.room_size = float(room_size)
         self.max_episode_steps = int(max_episode_steps)
+        self.randomise_visuals = bool(randomise_visuals)
+        self.light, self.tint, self.fov_y = 1.0, np.ones(3, np.float32), FOV_Y
         self.observation_space = spaces.Box(0, 255, (3, OBS_HEIGHT, OBS_WIDTH), np.uint8)
         self.action_space = spaces.Discrete(6)
         self.layout: Layout | None = None
@@ -86,6 +94,7 @@ class MineEnv(gym.Env):
         self.steps = 0
         self._expert = None
         self._generate()
+        self._draw_visuals()
         self._walk = self.layout.rects(AGENT_RADIUS)
         self._entities_changed(static=True)
         obs = self._observe()
@@ -253,6 +262,16 @@ class MineEnv(gym.Env):
 
     # --- rendering ----------------------------------------------------------------------------
 
+    def _draw_visuals(self) -> None:
+        """This episode's light, wall tint and field of view (the defaults unless randomised)."""
+        if not self.randomise_visuals:
+            self.light, self.tint, self.fov_y = 1.0, np.ones(3, np.float32), FOV_Y
+            return
+        u = self._rng.uniform
+        self.light = u(*LIGHT_RANGE)
+        self.tint = np.array([u(*TINT_RANGE) for _ in range(3)], np.float32)
+        self.fov_y = u(*FOV_RANGE)
+
     def _entities_changed(self, static: bool = False) -> None:
         """Refresh collision discs and the entity geometry after something moved."""
         self.version += 1
@@ -265,8 +284,13 @@ class MineEnv(gym.Env):
             self._scene = Scene(OBS_WIDTH, OBS_HEIGHT, FOV_Y, EYE_HEIGHT, far)
         dynamic = (np.concatenate([e.vertices() for e in world]) if world
                    else np.zeros((0, mesh.VERTEX_FLOATS), np.float32))
+        if self.randomise_visuals:
+            dynamic[:, 3:6] *= self.light   # concatenate made a copy: the cached meshes stay
         if static:
             static_mesh = mesh.static_scene(self.layout, WALL_HEIGHT, DOOR_HEIGHT)
+            if self.randomise_visuals:
+                static_mesh[:, 3:6] *= self.light * self.tint
+            self._scene.set_fov(self.fov_y)
             self._scene.set_static(static_mesh, dynamic)
         else:
             self._scene.set_dynamic(dynamic)

@@ -126,16 +126,25 @@ class Scene:
 
     def __init__(self, width: int, height: int, fov_y: float, eye_height: float, far: float):
         self.g = gl(width, height)
-        f = 1.0 / math.tan(math.radians(fov_y) / 2)
-        near = 0.05
-        self.projection = (f * height / width, f,
-                           (far + near) / (near - far), 2 * far * near / (near - far))
+        self.aspect, self.far = height / width, far
+        self.fov_y = None
+        self.set_fov(fov_y)
         self.eye_height = float(eye_height)
         self.capacity = 0
         self.vbo = None
         self.vao = None
         self.static_n = 0
         self.count = 0
+
+    def set_fov(self, fov_y: float) -> None:
+        """Vertical field of view in degrees (a new projection tuple, so render() uploads it)."""
+        if fov_y == self.fov_y:
+            return
+        self.fov_y = fov_y
+        f = 1.0 / math.tan(math.radians(fov_y) / 2)
+        near, far = 0.05, self.far
+        self.projection = (f * self.aspect, f,
+                           (far + near) / (near - far), 2 * far * near / (near - far))
 
     def set_static(self, static: np.ndarray, dynamic: np.ndarray) -> None:
         """Upload a new scene (at reset): static geometry followed by the entities."""

@@ -135,12 +135,14 @@ class MineRescueEnv(MineEnv):
         placement: "fixed" or "any-room" (domain randomisation of the start rooms).
         phase: curriculum phase 1..6 of ``three-room`` (1 = the full task), or None.
         render_mode: None or "rgb_array" (first-person view and map side by side).
+        randomise_visuals: draw the light level, the wall colour and the field of view anew each
+            episode (visual domain randomisation; the layout of a seed does not change).
     """
 
     def __init__(self, task: str = "two-room", num_rooms: int | None = None,
                  room_size: float = 16.0, max_episode_steps: int | None = None,
                  placement: str = "fixed", phase: int | None = None,
-                 render_mode: str | None = None):
+                 render_mode: str | None = None, randomise_visuals: bool = False):
         if task not in TASKS:
             raise ValueError(f"unknown task {task!r}; choose one of {', '.join(TASKS)}")
         spec = TASKS[task]
@@ -161,7 +163,7 @@ class MineRescueEnv(MineEnv):
             raise ValueError(f"placement must be one of {', '.join(PLACEMENTS)}, got {placement!r}")
         self.placement = placement
         self.phase = _check_phase(task, placement, phase)
-        super().__init__(max_episode_steps, room_size, render_mode)
+        super().__init__(max_episode_steps, room_size, render_mode, randomise_visuals)
 
     def _generate(self) -> None:
         TASKS[self.task].generate(self)

@@ -34,7 +34,8 @@ class ActorSpec:
 def env_kwargs(cfg: Config, **override) -> dict:
     """Environment keyword arguments of a config (the trainer's envs and the eval env)."""
     kwargs = dict(task=cfg.task, room_size=cfg.room_size,
-                  max_episode_steps=cfg.max_episode_steps, placement=cfg.placement)
+                  max_episode_steps=cfg.max_episode_steps, placement=cfg.placement,
+                  randomise_visuals=cfg.visual_randomisation)
     kwargs.update(override)
     if kwargs["task"] == "rooms":  # the other tasks have a fixed room count
         kwargs.setdefault("num_rooms", cfg.num_rooms)
@@ -113,9 +114,9 @@ class Actor:
         phase = self.phases[j] = self.control.phase
         if not self.spec.follows_curriculum:
             return
-        if self.cfg.curriculum == "phases":
+        if self.cfg.curriculum == "adaptive":
             self.envs[j].phase = phase
-        elif self.cfg.curriculum == "rooms":
+        elif self.cfg.curriculum == "schedule":
             self.envs[j].num_rooms = phase
 
     def pull_weights(self) -> None:
@@ -262,9 +263,9 @@ def attach_all(cfg: Config, handle: tuple):
 
 def initial_phase(cfg: Config) -> int:
     """Start of the curriculum: the easiest phase (6), or the first room count."""
-    if cfg.curriculum == "phases":
+    if cfg.curriculum == "adaptive":
         return 6
-    if cfg.curriculum == "rooms":
+    if cfg.curriculum == "schedule":
         return int(cfg.rooms_schedule[0])
     return 0
 
@@ -288,11 +289,12 @@ def actor_specs(cfg: Config) -> List[ActorSpec]:
 
 
 def eval_env_kwargs(cfg: Config) -> dict:
-    """The target task: the full problem, fixed placement, the schedule's last room count."""
-    override = {"placement": "fixed"}
+    """The target task: the full problem, fixed placement and look, the schedule's last room
+    count."""
+    override = {"placement": "fixed", "randomise_visuals": False}
     if cfg.eval_task and cfg.eval_task != cfg.task:
         override.update(task=cfg.eval_task, max_episode_steps=None)
-    if cfg.curriculum == "rooms":
+    if cfg.curriculum == "schedule":
         override["num_rooms"] = int(cfg.rooms_schedule[-1])
     return env_kwargs(cfg, **override)
 

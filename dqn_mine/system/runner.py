@@ -203,12 +203,12 @@ class Run:
         ``curriculum_window`` episodes (all of the current phase) exceeds the threshold; the
         scheduled room counts: by the share of updates done."""
         cfg = self.cfg
-        if cfg.curriculum == "phases" and self.phase > 1 \
+        if cfg.curriculum == "adaptive" and self.phase > 1 \
                 and len(self.curriculum_returns) == cfg.curriculum_window \
                 and self.curriculum_returns.mean > cfg.curriculum_threshold:
             self.phase -= 1
             self.curriculum_returns.clear()
-        elif cfg.curriculum == "rooms" and hasattr(self, "learner"):
+        elif cfg.curriculum == "schedule" and hasattr(self, "learner"):
             stages = cfg.rooms_schedule
             stage = min(len(stages) - 1, self.learner.updates * len(stages) // max(1, cfg.updates))
             self.phase = int(stages[stage])

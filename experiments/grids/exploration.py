@@ -6,7 +6,7 @@ from experiments.scales import PAPER_NOTE, QUICK, SMOKE, SMOKE_NOTE
 TITLE = "Exploration: baseline vs curriculum (phases) vs domain randomisation (three-room)"
 CONFIGS = {
     "baseline": {},
-    "curriculum": {"curriculum": "phases"},
+    "curriculum": {"curriculum": "adaptive"},
     "any-room": {"placement": "any-room"},
 }
 BASE = {"task": "three-room", "eval_every": 10_000, "eval_episodes": 10}

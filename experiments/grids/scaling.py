@@ -7,7 +7,7 @@ CONFIGS = {
     "rooms-3": {"num_rooms": 3},
     "rooms-4": {"num_rooms": 4},
     "rooms-5": {"num_rooms": 5},
-    "schedule-3-4-5": {"num_rooms": 5, "curriculum": "rooms", "rooms_schedule": (3, 4, 5)},
+    "schedule-3-4-5": {"num_rooms": 5, "curriculum": "schedule", "rooms_schedule": (3, 4, 5)},
 }
 BASE = {"task": "rooms", "placement": "any-room"}
 SCALES = {

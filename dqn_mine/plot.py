@@ -1,0 +1,100 @@
+"""Learning curves of one or more runs: `python -m dqn_mine.plot RUN_DIR [RUN_DIR ...]`.
+
+Writes one PNG (default ``<first run>/curves.png``) with the mean episode return of the training
+actors and, where logged, of the evaluation actor, against network updates and against wall time;
+a curriculum run gets its phase (or room count) in a third panel. Needs matplotlib (the ``plot``
+extra). Sweeps over many runs and seeds have their own plots: ``python -m experiments report``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+from typing import List, Optional
+
+from dqn_mine.metrics import read_metrics
+
+
+def load_run(run_dir: Path) -> List[dict]:
+    """The metrics rows of a run folder; a one-line ValueError when there are none."""
+    path = Path(run_dir) / "metrics.csv"
+    if not path.is_file():
+        raise ValueError(f"no metrics.csv in {run_dir}")
+    rows = read_metrics(path)
+    if not rows:
+        raise ValueError(f"{path} has no rows yet")
+    return rows
+
+
+def column(rows: List[dict], name: str) -> List[float]:
+    return [r.get(name, math.nan) for r in rows]
+
+
+def has_values(rows: List[dict], name: str) -> bool:
+    return any(not math.isnan(v) for v in column(rows, name))
+
+
+def plot_runs(runs: dict, out: Path) -> Path:
+    """runs: label -> metrics rows. One figure, return panels side by side (+ phase panel)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import matplotlib.ticker
+
+    curriculum = any(has_values(rows, "phase") and len(set(column(rows, "phase"))) > 1
+                     for rows in runs.values())
+    panels = 3 if curriculum else 2
+    fig, axes = plt.subplots(1, panels, figsize=(5.2 * panels, 3.8), dpi=110)
+    for i, (label, rows) in enumerate(runs.items()):
+        color = plt.get_cmap("tab10")(i % 10)
+        for ax, x, scale in ((axes[0], "update", 1.0), (axes[1], "wall_time", 60.0)):
+            xs = [v / scale for v in column(rows, x)]
+            ax.plot(xs, column(rows, "episode_return"), color=color, lw=2, label=label)
+            if has_values(rows, "eval_return"):
+                ax.plot(xs, column(rows, "eval_return"), color=color, lw=1.5, ls="--",
+                        label=f"{label} (evaluation, full task)")
+        if curriculum:
+            axes[2].step(column(rows, "update"), column(rows, "phase"), where="post",
+                         color=color, lw=2, label=label)
+    for ax, xlabel in zip(axes, ("network updates", "wall time (minutes)")):
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("mean episode return")
+        ax.set_ylim(-0.03, 1.03)
+    if curriculum:
+        axes[2].set_xlabel("network updates")
+        axes[2].set_ylabel("curriculum phase / room count")
+        axes[2].yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out)
+    plt.close(fig)
+    return out
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("runs", nargs="+", help="run folders (each with metrics.csv)")
+    ap.add_argument("--out", default=None, help="PNG to write (default <first run>/curves.png)")
+    args = ap.parse_args(argv)
+    try:
+        runs = {Path(d).name: load_run(Path(d)) for d in args.runs}
+        import matplotlib  # noqa: F401
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except ImportError:
+        print("error: plotting needs matplotlib: pip install -e .[plot]", file=sys.stderr)
+        return 2
+    out = plot_runs(runs, Path(args.out) if args.out else Path(args.runs[0]) / "curves.png")
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
