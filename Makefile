@@ -37,12 +37,13 @@ clean:
 	rm -rf $(VENV) *.egg-info .pytest_cache
 
 # -- experiments (experiments/grids/<GRID>.py; see `python -m experiments list`) ------------------
-# SCALE=paper (the study's settings) | quick (about an hour on 2 CPU cores) | smoke (minutes).
+# SCALE=paper (the study's settings) | quick (about an hour on 2 CPU cores) | smoke (minutes)
+# | auto (the default: paper on a CUDA machine, else quick).
 # SEEDS=N runs seeds 0..N-1 (default: the grid's for the scale); JOBS=J runs at a time (never more
 # busy processes than cores). Re-running the same command skips finished runs and resumes
 # interrupted ones. Output: $(OUT)summary.csv, report.md and PNG plots.
 GRID  ?= ablation
-SCALE ?= paper
+SCALE ?= auto
 SEEDS ?=
 JOBS  ?= 1
 OUT   ?= results/$(GRID)/

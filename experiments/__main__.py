@@ -36,9 +36,9 @@ def build_parser() -> argparse.ArgumentParser:
                        ("report", "aggregate and plot what a sweep has logged so far")):
         p = sub.add_parser(name, help=text)
         p.add_argument("grid", help="grid file under experiments/grids/ (see `list`)")
-        p.add_argument("--scale", default="paper", choices=SCALES,
+        p.add_argument("--scale", default="auto", choices=("auto",) + SCALES,
                        help="paper: the study's settings; quick: about an hour on 2 CPU cores; "
-                            "smoke: minutes (default: paper)")
+                            "smoke: minutes; auto: paper with CUDA, else quick (default: auto)")
         p.add_argument("--seeds", type=int, default=None,
                        help="number of seeds, 0..N-1 (default: the grid's for the scale)")
         p.add_argument("--seed-list", type=int, nargs="+", default=None, metavar="SEED",
@@ -55,6 +55,15 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--no-progress", dest="progress", action="store_false",
                            help="no progress bar over runs")
     return parser
+
+
+def resolve_scale(scale: str) -> str:
+    """``auto``: the study's settings where a GPU can carry them, else the 2-core reduction."""
+    if scale != "auto":
+        return scale
+    import torch
+
+    return "paper" if torch.cuda.is_available() else "quick"
 
 
 def seeds_of(args, grid) -> List[int]:
@@ -82,6 +91,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if args.command == "list":
             return cmd_list()
         grid = load_grid(args.grid)
+        args.scale = resolve_scale(args.scale)
         seeds = seeds_of(args, grid)
         out = Path(args.out or f"results/{grid.name}")
         specs = grid.expand(args.scale, out, seeds)

@@ -329,3 +329,12 @@ def test_smoke_ablation_end_to_end(tmp_path):
     for png in PNGS + ("sampled_reward.png",):
         assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
         assert f"]({png})" in report
+
+
+def test_auto_scale_fits_the_machine():
+    import torch
+
+    from experiments.__main__ import resolve_scale
+
+    assert resolve_scale("auto") == ("paper" if torch.cuda.is_available() else "quick")
+    assert [resolve_scale(s) for s in SCALES] == list(SCALES)
