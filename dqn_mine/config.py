@@ -212,6 +212,8 @@ def _problems(c: Config) -> List[str]:
     for name, low in at_least.items():
         if getattr(c, name) < low:
             p.append(f"--{_flag(name)} must be at least {low}, got {getattr(c, name)}")
+    if c.n_step > 254:  # the replay stores the bootstrap offset in one byte
+        p.append(f"--n-step must be at most 254, got {c.n_step}")
     streams = c.actors * c.envs_per_actor
     if c.replay_capacity < c.batch_size:
         p.append(f"--replay-capacity {c.replay_capacity} is smaller than --batch-size "
@@ -219,6 +221,11 @@ def _problems(c: Config) -> List[str]:
     elif streams >= 1 and c.replay_capacity // streams <= c.n_step + c.frame_stack:
         p.append(f"--replay-capacity {c.replay_capacity} leaves each of the {streams} actor "
                  f"environments fewer than n-step + frame-stack + 1 slots")
+    elif streams >= 1 and min_live_transitions(c) < c.batch_size:
+        p.append(f"--replay-capacity {c.replay_capacity} holds as few as "
+                 f"{min_live_transitions(c)} sampleable transitions over {streams} actor "
+                 f"environments (frames still being written are not sampleable), fewer than "
+                 f"--batch-size {c.batch_size}")
     if not 0.0 < c.gamma <= 1.0:
         p.append(f"--gamma must be in (0, 1], got {c.gamma}")
     for name in ("epsilon", "eval_epsilon"):
@@ -242,6 +249,9 @@ def _problems(c: Config) -> List[str]:
         p.append(f"--max-episode-steps must be at least 1, got {c.max_episode_steps}")
     if c.task == "rooms" and c.num_rooms < 2:
         p.append(f"--num-rooms must be at least 2 for the rooms task, got {c.num_rooms}")
+    if c.curriculum == "adaptive" and c.placement != "fixed":
+        p.append("--curriculum adaptive sets the start of each episode, so it needs "
+                 "--placement fixed")
     if c.curriculum == "adaptive" and c.task != "three-room":
         p.append(f"--curriculum adaptive needs --task three-room, got {c.task}")
     if c.curriculum == "schedule" and (c.task != "rooms" or not c.rooms_schedule
@@ -353,6 +363,10 @@ def parse_args(argv: Optional[List[str]] = None) -> Config:
             raise ConfigError(f"--resume {explicit['resume']}: {exc}") from None
         explicit = {k: v for k, v in explicit.items() if k != "preset"}
         explicit["run_dir"] = explicit["resume"]
+        for name in NETWORK_SHAPE:
+            if name in explicit and explicit[name] != getattr(base, name):
+                raise ConfigError(f"--{_flag(name)} {explicit[name]} differs from the resumed "
+                                  f"run's {getattr(base, name)}: the network's shape is fixed")
     else:
         preset = explicit.get("preset", _field("preset").default)
         if preset not in PRESETS:
@@ -360,6 +374,20 @@ def parse_args(argv: Optional[List[str]] = None) -> Config:
                               f"(choose from {', '.join(PRESETS)})")
         base = Config(**{**PRESETS[preset], "preset": preset})
     return dataclasses.replace(base, **explicit).validate()
+
+
+def min_live_transitions(c: Config) -> int:
+    """Sampleable transitions in a full replay at worst: each environment's ring holds back up to
+    one writer flush (at most 64 steps) plus an n-step window and a frame stack of frames that
+    start no complete transition yet (NStepWriter)."""
+    streams = c.actors * c.envs_per_actor
+    m = c.replay_capacity // streams
+    held_back = min(64, m - c.n_step - c.frame_stack) + c.n_step + c.frame_stack + 1
+    return streams * max(0, m - held_back)
+
+
+# Settings that shape the network: a resumed run must keep its checkpoint's.
+NETWORK_SHAPE = ("frame_stack", "history_len")
 
 
 def learner_threads(cfg: Config, cores: Optional[int] = None) -> int:

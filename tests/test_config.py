@@ -3,6 +3,7 @@ json round trip."""
 
 import dataclasses
 
+import numpy as np
 import pytest
 import torch
 
@@ -68,6 +69,11 @@ BAD = [
     (["--batch-size", "0"], "--batch-size"),
     (["--replay-capacity", "16"], "smaller than --batch-size"),
     (["--replay-capacity", "64", "--batch-size", "8", "--actors", "10"], "slots"),
+    (["--replay-capacity", "64", "--batch-size", "64", "--actors", "1"], "sampleable"),
+    (["--replay-capacity", "1000", "--batch-size", "512", "--actors", "7"], "sampleable"),
+    (["--n-step", "300"], "at most 254"),
+    (["--task", "three-room", "--curriculum", "adaptive", "--placement", "any-room"],
+     "--placement fixed"),
     (["--task", "cave"], "invalid choice"),
     (["--device", "tpu"], "invalid choice"),
     (["--placement", "anywhere"], "invalid choice"),
@@ -139,9 +145,37 @@ def test_resume_loads_the_saved_config_and_flags_still_win(tmp_path):
     saved.to_json(tmp_path / "config.json")
     c = parse_args(["--resume", str(tmp_path), "--updates", "99"])
     assert c == dataclasses.replace(saved, updates=99, resume=str(tmp_path), run_dir=str(tmp_path))
+    with pytest.raises(ConfigError, match="network's shape"):
+        parse_args(["--resume", str(tmp_path), "--history-len", "10"])
+    assert parse_args(["--resume", str(tmp_path), "--history-len", str(saved.history_len)])
     (tmp_path / "config.json").write_text("{")
     with pytest.raises(ConfigError, match="--resume"):
         parse_args(["--resume", str(tmp_path)])
+
+
+def test_live_transitions_bound_is_what_a_full_replay_holds():
+    """min_live_transitions against a real writer: fill one stream's ring well past a lap and
+    count the transitions the sampler could draw after every step."""
+    from dqn_mine.config import min_live_transitions
+    from dqn_mine.replay import NStepWriter, PrioritizedReplay, ReplayStorage
+    from dqn_mine.system.layout import replay_layout
+    from dqn_mine.system.shared import SharedBlocks
+
+    cfg = parse_args(["--actors", "1", "--replay-capacity", "200", "--batch-size", "8"])
+    layout = replay_layout(cfg)
+    with SharedBlocks.create(layout.block_specs()) as blocks:
+        storage = ReplayStorage(layout, blocks)
+        replay = PrioritizedReplay(storage)
+        writer = NStepWriter(storage, stream=0)
+        frame = np.zeros((3, 44, 76), np.uint8)
+        writer.begin_episode(frame, False)
+        sizes = []
+        for _ in range(700):
+            writer.append(np.zeros(6, np.float32), 0, 0.0, frame, False, False, False)
+            replay.ingest()
+            sizes.append(len(replay))
+    lowest = min(sizes[300:])                        # after the first lap
+    assert 0 < min_live_transitions(cfg) <= lowest < 200
 
 
 def test_run_dir_name():

@@ -69,8 +69,8 @@ def test_evaluation_results_arrive_in_the_metrics(tmp_path):
 
 
 def test_evaluation_actor_runs_the_full_target_task():
-    cfg = parse_args(["--task", "three-room", "--curriculum", "adaptive", "--placement",
-                      "any-room", "--visual-randomisation", "--eval-every", "1000"])
+    cfg = parse_args(["--task", "three-room", "--placement", "any-room",
+                      "--visual-randomisation", "--eval-every", "1000"])
     specs = actor_specs(cfg)
     evaluator = specs[-1]
     assert len(specs) == cfg.actors + 1 and evaluator.streams == ()
@@ -79,7 +79,9 @@ def test_evaluation_actor_runs_the_full_target_task():
         "three-room"
     assert not evaluator.env_kwargs["randomise_visuals"]
     assert all(s.env_kwargs["randomise_visuals"] for s in specs[:-1])
-    assert initial_phase(cfg) == 6
+    adaptive = parse_args(["--task", "three-room", "--curriculum", "adaptive",
+                           "--eval-every", "1000"])
+    assert initial_phase(adaptive) == 6 and not actor_specs(adaptive)[-1].follows_curriculum
     rooms = parse_args(["--task", "rooms", "--curriculum", "schedule", "--rooms-schedule", "3", "4",
                         "5", "--eval-every", "1000"])
     assert eval_env_kwargs(rooms)["num_rooms"] == 5 and initial_phase(rooms) == 3

@@ -112,6 +112,42 @@ def test_serial_run_writes_the_run_folder(tmp_path):
     assert summary["updates"] == 60 and summary["exit_code"] == 0
 
 
+def test_resume_takes_the_new_learning_rate(tmp_path):
+    """Flags given on resume win, the optimiser's saved learning rate included."""
+    from dqn_mine.system import checkpoint as ckpt
+
+    run_dir = tmp_path / "resumed"
+    res = run_train(*TINY, "--serial", "--updates", "40", "--run-dir", str(run_dir))
+    assert res.returncode == 0, res.stderr[-3000:]
+    res = run_train("--resume", str(run_dir), "--updates", "60", "--lr", "1e-5")
+    assert res.returncode == 0, res.stderr[-3000:]
+    state = ckpt.load(run_dir / "checkpoint.pt")
+    assert {g["lr"] for g in state["updater"]["optimizer"]["param_groups"]} == {1e-5}
+    assert json.loads((run_dir / "config.json").read_text())["lr"] == 1e-5
+
+
+def test_replay_ratio_budget_counts_updates_since_the_actor_started():
+    """After a resume the update counter starts high but the actors' steps start at zero: the
+    actors' step budget must grow with the updates done since, not with the total."""
+    from types import SimpleNamespace
+
+    from dqn_mine.config import parse_args
+    from dqn_mine.system.actor import Actor
+    from dqn_mine.system.control import Control
+    from dqn_mine.system.shared import SharedBlocks
+
+    cfg = parse_args(["--actors", "2", "--prefill", "200", "--replay-ratio", "0.05",
+                      "--batch-size", "32"])
+    with SharedBlocks.create(Control.specs(2)) as blocks:
+        control = Control(blocks)
+        control.updates = 5000                                     # restored from a checkpoint
+        actor = SimpleNamespace(cfg=cfg, control=control, updates_at_start=control.updates)
+        slack = 2 * 32 / 0.05 / 2 + 64
+        assert Actor.allowed_steps(actor) == 200 + slack
+        control.updates = 5060
+        assert Actor.allowed_steps(actor) == 200 + 60 / 0.05 / 2 + slack
+
+
 # -- parallel runs ---------------------------------------------------------------------------
 def test_parallel_run_with_two_actors(tmp_path):
     run_dir = tmp_path / "par"
@@ -169,6 +205,28 @@ def test_killed_actor_stops_the_run_with_an_error(tmp_path):
     assert "actor 0 died (killed by SIGKILL)" in out + err
     assert (run_dir / "checkpoint.pt").exists()
     wait_for(lambda: not alive(kids), 10, "every child process to exit")
+
+
+def test_killed_runner_takes_its_actors_and_shared_memory_with_it(tmp_path):
+    """kill -9 of the runner: nobody sets the stop flag, so the actors notice their parent is
+    gone, exit, and the resource tracker then unlinks the run's segments."""
+    run_dir = tmp_path / "orphans"
+    proc = subprocess.Popen(train_cmd(*TINY, "--updates", "100000", "--run-dir", str(run_dir)),
+                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        wait_for(lambda: (run_dir / "metrics.csv").exists(), 240, "the run to start")
+        kids = children_of(proc.pid)
+        assert len(kids) >= 2
+        segments = [s for s in leftover_segments() if f"_{proc.pid}_" in s]
+        assert segments, "the run's shared memory was not found"
+        proc.kill()
+        proc.wait(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    wait_for(lambda: not alive(kids), 20, "the orphaned actors to exit")
+    wait_for(lambda: not set(segments) & set(leftover_segments()), 20,
+             "the resource tracker to unlink the segments")
 
 
 # -- learning --------------------------------------------------------------------------------

@@ -27,13 +27,14 @@ Wiring (the runner owns the shared memory; see ``dqn_mine.system.shared``)::
     replay.ingest()                                        # cheap; call before every sample
     out = Batch.empty(layout, 32)                          # optional: reuse the batch arrays
     batch = replay.sample(32, beta=beta_at(update, total_updates, 0.4), out=out)
-    replay.update_priorities(batch.indices, td_abs)        # queued: any thread may call it
+    replay.update_priorities(batch.indices, td_abs, batch.stamps)  # queued: any thread
 
 ``update_priorities`` only queues ``(|delta| + eta)^zeta``; the trees change at the next
 ``ingest()`` (merged with the new and overwritten transitions into one tree update) or
 ``sample()``, in the thread that samples. So a learner that samples in a background thread can
 report priorities from its training thread without a lock. A slot whose transition was
-overwritten meanwhile stays dead (the update would belong to the new transition).
+overwritten meanwhile stays dead, and with the batch's ``stamps`` a slot already refilled keeps
+its new transition's priority (the update belongs to the old one).
 ``apply_priority_updates()`` applies the queue right away.
 
 Data layout. Stream ``k`` writes its frames in order; frame number ``t`` (counted since the stream

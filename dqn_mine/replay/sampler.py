@@ -31,6 +31,8 @@ class Batch(NamedTuple):
     next_carrying: np.ndarray  # float32 [B]
     weights: np.ndarray        # float32 [B]          IS weights / max; 0 = overwritten meanwhile
     indices: np.ndarray        # int64 [B]            slots, for update_priorities
+    # int64 [B] frame number each sampled slot held, for update_priorities (None: not recorded)
+    stamps: Optional[np.ndarray] = None
 
     @staticmethod
     def empty(layout, batch_size: int) -> "Batch":
@@ -41,7 +43,7 @@ class Batch(NamedTuple):
                      np.empty(b, np.float32), np.empty(b, np.int64), np.empty(b, np.float32),
                      np.empty(b, np.float32), np.empty(obs_shape, np.uint8),
                      np.empty((b, h), np.int8), np.empty(b, np.float32), np.empty(b, np.float32),
-                     np.empty(b, np.int64))
+                     np.empty(b, np.int64), np.empty(b, np.int64))
 
 
 def beta_at(update: int, total_updates: int, beta0: float) -> float:
@@ -76,7 +78,8 @@ class PrioritizedReplay:
         self._live = 0
         self._strata = np.empty(0)
         self._max_p = 1.0                                    # largest |delta| + eta so far
-        self._pending: deque = deque()     # (slots, p^zeta) from update_priorities, any thread
+        # (slots, p^zeta, frame numbers or None) from update_priorities, any thread
+        self._pending: deque = deque()
 
     def __len__(self) -> int:
         """Transitions that can be sampled now."""
@@ -128,23 +131,32 @@ class PrioritizedReplay:
 
     def _drain(self, exclude: Optional[np.ndarray] = None):
         """The queued (slots, p^zeta), minus slots that died since they were sampled (a zero
-        leaf, or in ``exclude``): those stay dead."""
+        leaf, or in ``exclude``): those stay dead; and minus slots that now hold another
+        transition than the one sampled (its frame number moved on): the update is not its."""
         chunks = []
         while self._pending:
             chunks.append(self._pending.popleft())
         if not chunks:
             return np.empty(0, dtype=np.int64), np.empty(0)
-        if len(chunks) == 1:
-            idx, p = chunks[0]
-        else:
-            idx = np.concatenate([c[0] for c in chunks])
-            p = np.concatenate([c[1] for c in chunks])
+        idx = np.concatenate([c[0] for c in chunks])
+        p = np.concatenate([c[1] for c in chunks])
         keep = self.sum_tree[idx] > 0
         if exclude is not None:
             keep &= ~np.isin(idx, exclude)
+        for start, (slots, _, stamps) in zip(np.cumsum([0] + [c[0].size for c in chunks]),
+                                             chunks):
+            if stamps is not None:
+                keep[start:start + slots.size] &= self.frame_numbers(slots) == stamps
         if keep.all():
             return idx, p
         return idx[keep], p[keep]
+
+    def frame_numbers(self, slots: np.ndarray) -> np.ndarray:
+        """Frame number (counted since its stream began) each slot holds as of the last ingest:
+        the one in ``[alive_from, alive_from + M)`` congruent to the slot's position."""
+        m = self._m
+        start = self._alive_from.take(slots // m)
+        return start + (slots % m - start) % m
 
     def _slots(self, stream: int, lo: int, hi: int) -> np.ndarray:
         if hi <= lo:
@@ -185,6 +197,8 @@ class PrioritizedReplay:
         s.discount.take(idx, out=out.discount, mode="clip")
         out.action[:] = s.action.take(idx)
         out.indices[:] = idx
+        if out.stamps is not None:
+            out.stamps[:] = self.frame_numbers(idx)
         # w_i = (N P_i)^-beta / max_j (N P_j)^-beta = (p_i / p_min)^-beta
         p /= self.min_tree.min()
         np.power(p, -beta, out=out.weights, casting="same_kind")
@@ -211,12 +225,15 @@ class PrioritizedReplay:
             self._live -= gone.size
             self._set(gone, np.zeros(gone.size))
 
-    def update_priorities(self, indices, td_abs) -> None:
+    def update_priorities(self, indices, td_abs, stamps=None) -> None:
         """Queue p = |delta| + eta for sampled slots. Applied at the next :meth:`ingest` or
         :meth:`sample`, in the thread that samples: so the learner may call this from its
         training thread without a lock. A slot that died meanwhile stays dead (its transition
-        was overwritten; the update would belong to the new one)."""
+        was overwritten; the update would belong to the new one). With ``stamps`` (the batch's
+        ``stamps``), a slot already refilled with a newer transition keeps that one's priority."""
         idx = np.array(indices, dtype=np.int64).ravel()
+        if stamps is not None:
+            stamps = np.array(stamps, dtype=np.int64).ravel()
         p = np.abs(np.asarray(td_abs, dtype=np.float64)).ravel()
         if p.size:
             p += self.eta
@@ -225,4 +242,4 @@ class PrioritizedReplay:
                 raise ValueError("update_priorities: TD errors must be finite")
             self._max_p = max(self._max_p, top)
             p **= self.zeta
-            self._pending.append((idx, p))
+            self._pending.append((idx, p, stamps))

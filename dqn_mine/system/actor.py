@@ -5,6 +5,7 @@ streams of the shared replay. Runs as a spawned process (`actor_main`) or inline
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import signal
 import time
@@ -45,7 +46,8 @@ def env_kwargs(cfg: Config, **override) -> dict:
 class Actor:
     """Acting on ``len(spec.streams)`` environments; ``step()`` advances all of them by one step."""
 
-    def __init__(self, cfg: Config, spec: ActorSpec, storage, control, weights):
+    def __init__(self, cfg: Config, spec: ActorSpec, storage, control, weights,
+                 parent_pid: Optional[int] = None):
         import torch
 
         from dqn_mine.agent.network import DuelingQNetwork
@@ -53,6 +55,13 @@ class Actor:
         from dqn_mine.replay import NStepWriter
 
         self.cfg, self.spec, self.control, self.weights = cfg, spec, control, weights
+        # A runner killed outright (SIGKILL, the OOM killer) never sets the stop flag: a spawned
+        # actor watches its parent instead, or it would act forever and pin the shared memory.
+        self.parent_pid = parent_pid
+        self.next_parent_check = 0.0
+        # The replay-ratio budget counts this process's updates only: a resumed run restores the
+        # update counter but its actors start from zero steps.
+        self.updates_at_start = control.updates
         self.torch = torch
         self.rng = np.random.default_rng(spec.seed)
         self.net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
@@ -103,7 +112,8 @@ class Actor:
                                     int(self.lengths[j]), int(self.phases[j]),
                                     is_eval=not self.spec.streams)
         self.episodes += 1
-        self.pull_weights()   # actors pick up new weights between episodes
+        if self.spec.streams:  # the evaluation actor keeps one version for a whole evaluation
+            self.pull_weights()   # actors pick up new weights between episodes
         self.apply_curriculum(j)
         obs, info = self.envs[j].reset()
         self._begin(j, obs, info)
@@ -173,14 +183,27 @@ class Actor:
         cfg = self.cfg
         if not cfg.replay_ratio:
             return float("inf")
-        share = self.control.updates / cfg.replay_ratio / max(1, cfg.actors)
+        share = (self.control.updates - self.updates_at_start) / cfg.replay_ratio \
+            / max(1, cfg.actors)
         slack = 2 * cfg.batch_size / cfg.replay_ratio / max(1, cfg.actors) + 64
         return cfg.prefill + share + slack
+
+    def should_stop(self) -> bool:
+        """The runner asked to stop, or it is gone (checked about once a second)."""
+        if self.control.stopping:
+            return True
+        if self.parent_pid is None:
+            return False
+        now = time.monotonic()
+        if now < self.next_parent_check:
+            return False
+        self.next_parent_check = now + 1.0
+        return os.getppid() != self.parent_pid   # re-parented: the runner died
 
     def run(self) -> None:
         if not self.spec.streams:
             return self.run_evaluations()
-        while not self.control.stopping:
+        while not self.should_stop():
             if self.steps >= self.allowed_steps():
                 time.sleep(0.002)
                 continue
@@ -192,7 +215,7 @@ class Actor:
         ``eval_every`` training env steps (paced by the training actors so that evaluation
         does not steal cores from them)."""
         next_at = self.cfg.eval_every
-        while not self.control.stopping:
+        while not self.should_stop():
             if self.control.total_actor_steps() < next_at:
                 time.sleep(0.05)
                 continue
@@ -208,7 +231,7 @@ class Actor:
         if every and self.cfg.run_dir and (self.evaluations - 1) % every == 0:
             self.recording = [self.envs[0].render()]
         target = self.episodes + episodes
-        while self.episodes < target and not self.control.stopping:
+        while self.episodes < target and not self.should_stop():
             self.step()
             if self.recording is not None:
                 self.recording.append(self.envs[0].render())
@@ -232,6 +255,9 @@ def actor_main(cfg: Config, spec: ActorSpec, handle: tuple, errors) -> None:
     # The runner handles Ctrl-C and tells actors to stop through shared state; an actor that
     # died on SIGINT mid-write would leave a half-published block.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # The runner's pid as the runner gave it: a getppid() here could already read 1 if the
+    # runner died while this process was still starting.
+    parent = multiprocessing.parent_process().pid
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     blocks = None
     try:
@@ -239,7 +265,7 @@ def actor_main(cfg: Config, spec: ActorSpec, handle: tuple, errors) -> None:
 
         torch.set_num_threads(1)
         blocks, storage, control, weights = attach_all(cfg, handle)
-        Actor(cfg, spec, storage, control, weights).run()
+        Actor(cfg, spec, storage, control, weights, parent_pid=parent).run()
     except BaseException as exc:  # report every failure to the runner, then exit non-zero
         errors.send((spec.index, f"{type(exc).__name__}: {exc}", traceback.format_exc()))
         raise SystemExit(1)

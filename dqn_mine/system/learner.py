@@ -95,7 +95,8 @@ class Learner:
         self.updates = 0
         self.source = BatchSource(
             self.replay, cfg.batch_size, beta=self.beta,
-            to_device=lambda b: batch_to_device(b, device), threaded=threaded)
+            to_device=lambda b: batch_to_device(b, device), queue_size=cfg.learner_queue,
+            threaded=threaded)
 
     def beta(self) -> float:
         from dqn_mine.replay import beta_at
@@ -104,6 +105,9 @@ class Learner:
 
     def load_state(self, state: dict) -> None:
         self.updater.load_state_dict(state["updater"])
+        # The optimiser's state carries the old learning rate; a resumed run's --lr wins.
+        for group in self.updater.optimizer.param_groups:
+            group["lr"] = self.cfg.lr
         self.updates = int(state["counters"]["updates"])
         self.control.updates = self.updates
 
@@ -117,7 +121,8 @@ class Learner:
             return None
         batch, device_batch = item
         stats = self.updater.update(device_batch)
-        self.replay.update_priorities(batch.indices, stats["td_abs"])  # queued, thread-safe
+        # queued, thread-safe; the stamps keep it off slots refilled since the sample
+        self.replay.update_priorities(batch.indices, stats["td_abs"], batch.stamps)
         self.updates += 1
         self.control.updates = self.updates
         if self.updates % self.cfg.publish_interval == 0:

@@ -305,6 +305,9 @@ class Run:
             if stats is None:
                 continue
             bar.update(1)
+            # Every update, not only at log rows: the curriculum reacts at once and the actors'
+            # episode rings (4,096 records each) can never lap an unread record.
+            self.drain_episodes()
             for key in agg:
                 agg[key].append(float(stats[key]))
             if learner.updates % cfg.log_interval == 0 or learner.updates == cfg.updates:
