@@ -154,55 +154,58 @@ def test_beta_schedule():
     assert beta_at(3, 0, 0.4) == 1.0
 
 
-def test_queued_updates_merge_with_ingest_and_never_revive_the_dead():
+@pytest.fixture
+def ten_slots():
+    """One 10-slot stream of one-step transitions and its writer (eta 0), episode begun."""
     layout = ReplayLayout(num_streams=1, stream_capacity=10, frame_shape=(1,), history_len=0,
                           n_step=1)
     with SharedBlocks.create(layout.block_specs()) as blocks:
         s = ReplayStorage(layout, blocks)
         w = NStepWriter(s, 0, eta=0.0, flush_every=1)
-        f = np.zeros(1, np.uint8)
-        w.begin_episode(f, 0.0)
-        for _ in range(9):                         # Q(s_t, a) = 0: initial priority |r| = 1
-            w.append(np.zeros(6, np.float32), 0, 1.0, f, 0.0)
-        replay = PrioritizedReplay(s, zeta=1.0, eta=0.0, seed=0)
-        assert replay.ingest() == 8 and len(replay) == 8     # transitions 0 .. 7
-        replay.update_priorities([0, 5], [7.0, 3.0])          # queued, e.g. by another thread
-        assert replay.sum_tree[0] == 1.0
-        for _ in range(9, 12):                     # frames 10, 11, 12 overwrite slots 0, 1, 2
-            w.append(np.zeros(6, np.float32), 0, 2.0, f, 0.0)
-        assert replay.ingest() == 3                # transitions 8, 9, 10 (slot 0 refilled)
-        assert replay.sum_tree[5] == 3.0           # the queued update landed ...
-        assert replay.sum_tree[0] == 2.0           # ... but not on slot 0's new transition
-        assert replay.sum_tree[1] == 0.0           # transition 1 died, 11 is not complete
-        assert replay.sum_tree[2] == 0.0 and len(replay) == 8      # transitions 3 .. 10
-        del s, w, replay
+        w.begin_episode(np.zeros(1, np.uint8), 0.0)
+        yield layout, s, w
+        del s, w
 
 
-def test_a_late_update_for_a_refilled_slot_is_dropped():
+def test_queued_updates_merge_with_ingest_and_never_revive_the_dead(ten_slots):
+    layout, s, w = ten_slots
+    f = np.zeros(1, np.uint8)
+    for _ in range(9):                         # Q(s_t, a) = 0: initial priority |r| = 1
+        w.append(np.zeros(6, np.float32), 0, 1.0, f, 0.0)
+    replay = PrioritizedReplay(s, zeta=1.0, eta=0.0, seed=0)
+    assert replay.ingest() == 8 and len(replay) == 8     # transitions 0 .. 7
+    replay.update_priorities([0, 5], [7.0, 3.0])          # queued, e.g. by another thread
+    assert replay.sum_tree[0] == 1.0
+    for _ in range(9, 12):                     # frames 10, 11, 12 overwrite slots 0, 1, 2
+        w.append(np.zeros(6, np.float32), 0, 2.0, f, 0.0)
+    assert replay.ingest() == 3                # transitions 8, 9, 10 (slot 0 refilled)
+    assert replay.sum_tree[5] == 3.0           # the queued update landed ...
+    assert replay.sum_tree[0] == 2.0           # ... but not on slot 0's new transition
+    assert replay.sum_tree[1] == 0.0           # transition 1 died, 11 is not complete
+    assert replay.sum_tree[2] == 0.0 and len(replay) == 8      # transitions 3 .. 10
+    del replay
+
+
+def test_a_late_update_for_a_refilled_slot_is_dropped(ten_slots):
     """Sampled, then the slot is overwritten and refilled and ingested, and only then does the
     learner report the old transition's TD error: with the batch's stamps the new transition
     keeps its own priority; slots not refilled still take the update."""
-    layout = ReplayLayout(num_streams=1, stream_capacity=10, frame_shape=(1,), history_len=0,
-                          n_step=1)
-    with SharedBlocks.create(layout.block_specs()) as blocks:
-        s = ReplayStorage(layout, blocks)
-        w = NStepWriter(s, 0, eta=0.0, flush_every=1)
-        f = np.zeros(1, np.uint8)
-        w.begin_episode(f, 0.0)
-        for _ in range(9):                         # transitions 0 .. 7, priority |r| = 1
-            w.append(np.zeros(6, np.float32), 0, 1.0, f, 0.0)
-        replay = PrioritizedReplay(s, zeta=1.0, eta=0.0, seed=0)
-        replay.ingest()
-        batch = replay.sample(64, 1.0, out=Batch.empty(layout, 64))
-        assert {0, 5} <= set(batch.indices.tolist())
-        np.testing.assert_array_equal(batch.stamps, batch.indices)   # first lap: t = slot
-        for _ in range(9, 12):                     # transitions 8, 9, 10; slot 0 refilled
-            w.append(np.zeros(6, np.float32), 0, 2.0, f, 0.0)
-        replay.ingest()
-        assert replay.sum_tree[0] == 2.0
-        pick = np.array([np.flatnonzero(batch.indices == k)[0] for k in (0, 5)])
-        replay.update_priorities(batch.indices[pick], [7.0, 3.0], batch.stamps[pick])
-        replay.ingest()
-        assert replay.sum_tree[0] == 2.0           # the new transition's own priority
-        assert replay.sum_tree[5] == 3.0           # the sampled transition is still there
-        del s, w, replay, batch
+    layout, s, w = ten_slots
+    f = np.zeros(1, np.uint8)
+    for _ in range(9):                         # transitions 0 .. 7, priority |r| = 1
+        w.append(np.zeros(6, np.float32), 0, 1.0, f, 0.0)
+    replay = PrioritizedReplay(s, zeta=1.0, eta=0.0, seed=0)
+    replay.ingest()
+    batch = replay.sample(64, 1.0, out=Batch.empty(layout, 64))
+    assert {0, 5} <= set(batch.indices.tolist())
+    np.testing.assert_array_equal(batch.stamps, batch.indices)   # first lap: t = slot
+    for _ in range(9, 12):                     # transitions 8, 9, 10; slot 0 refilled
+        w.append(np.zeros(6, np.float32), 0, 2.0, f, 0.0)
+    replay.ingest()
+    assert replay.sum_tree[0] == 2.0
+    pick = np.array([np.flatnonzero(batch.indices == k)[0] for k in (0, 5)])
+    replay.update_priorities(batch.indices[pick], [7.0, 3.0], batch.stamps[pick])
+    replay.ingest()
+    assert replay.sum_tree[0] == 2.0           # the new transition's own priority
+    assert replay.sum_tree[5] == 3.0           # the sampled transition is still there
+    del replay, batch
