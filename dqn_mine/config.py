@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import time
 import typing
 from dataclasses import dataclass, field
@@ -21,8 +22,10 @@ from typing import Any, Dict, List, Optional, Tuple
 
 try:  # the environment package owns the list of tasks once it exists
     from dqn_mine.env import TASKS
+    from dqn_mine.env.tasks import MAX_ROOMS
 except ImportError:
     TASKS = ("one-room", "two-room", "three-room", "rooms")
+    MAX_ROOMS = 12
 
 PLACEMENTS = ("fixed", "any-room")
 DEVICES = ("auto", "cpu", "cuda")
@@ -243,20 +246,24 @@ def _problems(c: Config) -> List[str]:
         p.append(f"--max-grad-norm must be >= 0 (0 = off), got {c.max_grad_norm}")
     if c.replay_ratio is not None and not c.replay_ratio > 0:
         p.append(f"--replay-ratio must be positive, got {c.replay_ratio}")
-    if not c.room_size > 0:
-        p.append(f"--room-size must be positive, got {c.room_size}")
+    if not 0 < c.room_size < math.inf:
+        p.append(f"--room-size must be a positive finite number, got {c.room_size}")
     if c.max_episode_steps is not None and c.max_episode_steps < 1:
         p.append(f"--max-episode-steps must be at least 1, got {c.max_episode_steps}")
-    if c.task == "rooms" and c.num_rooms < 2:
-        p.append(f"--num-rooms must be at least 2 for the rooms task, got {c.num_rooms}")
+    if c.task == "rooms" and not 2 <= c.num_rooms <= MAX_ROOMS:
+        p.append(f"--num-rooms must be in 2..{MAX_ROOMS} for the rooms task, got {c.num_rooms}")
+    if c.task != "rooms" and c.num_rooms != _field("num_rooms").default:
+        p.append(f"--num-rooms applies to --task rooms only ({c.task} has its own room count)")
     if c.curriculum == "adaptive" and c.placement != "fixed":
         p.append("--curriculum adaptive sets the start of each episode, so it needs "
                  "--placement fixed")
     if c.curriculum == "adaptive" and c.task != "three-room":
         p.append(f"--curriculum adaptive needs --task three-room, got {c.task}")
     if c.curriculum == "schedule" and (c.task != "rooms" or not c.rooms_schedule
-                                    or min(c.rooms_schedule) < 2):
-        p.append("--curriculum schedule needs --task rooms and a --rooms-schedule of counts >= 2")
+                                    or min(c.rooms_schedule) < 2
+                                    or max(c.rooms_schedule) > MAX_ROOMS):
+        p.append(f"--curriculum schedule needs --task rooms and a --rooms-schedule of counts in "
+                 f"2..{MAX_ROOMS}")
     return p
 
 

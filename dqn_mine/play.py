@@ -111,17 +111,31 @@ def save_gif(frames: list[np.ndarray], path: Path, fps: float) -> None:
                    duration=max(1, round(1000 / fps)), loop=0)
 
 
+def check_output_settings(args: argparse.Namespace, out: Path) -> None:
+    """What would only fail after a whole episode was recorded: fail before it instead."""
+    if args.seed < 0:
+        raise ValueError(f"--seed must be >= 0, got {args.seed}")
+    if not args.fps > 0:
+        raise ValueError(f"--fps must be positive, got {args.fps}")
+    if not 0.0 <= args.epsilon <= 1.0:
+        raise ValueError(f"--epsilon must be in [0, 1], got {args.epsilon}")
+    if out.suffix.lower() != ".gif" or out.is_dir():
+        raise ValueError(f"--out must name a .gif file, got {out}")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+    ap = argparse.ArgumentParser(prog="python -m dqn_mine.play",
+                                 description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--policy", choices=sorted(POLICIES), default=None,
                     help="who acts (default: agent with --checkpoint, else expert)")
     ap.add_argument("--checkpoint", default=None,
                     help="trained agent: a run folder or checkpoint.pt (its task is the default)")
     ap.add_argument("--epsilon", type=float, default=0.0, help="agent's exploration rate")
-    ap.add_argument("--task", default=None, help="one-room, two-room, three-room or rooms")
+    ap.add_argument("--task", default=None, help="one-room, two-room, three-room or rooms "
+                    "(default: the checkpoint's, else rooms)")
     ap.add_argument("--num-rooms", type=int, default=None,
-                    help="rooms of the `rooms` task (default 4)")
+                    help="rooms of the `rooms` task, 2..12 (default 4)")
     ap.add_argument("--room-size", type=float, default=None, help="side of each room in units")
     ap.add_argument("--placement", default=None, help="fixed or any-room (domain randomisation)")
     ap.add_argument("--phase", type=int, default=None, help="three-room curriculum phase 1..6")
@@ -143,6 +157,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     out = Path(args.out or f"runs/play/{args.policy}.gif")
     try:
+        check_output_settings(args, out)
         fill_env_settings(args)
         env = make_env(args)
         policy = POLICIES[args.policy](args)

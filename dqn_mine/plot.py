@@ -78,7 +78,8 @@ def plot_runs(runs: dict, out: Path) -> Path:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m dqn_mine.plot",
+                                 description=__doc__.split("\n\n")[0])
     ap.add_argument("runs", nargs="+", help="run folders (each with metrics.csv)")
     ap.add_argument("--out", default=None, help="PNG to write (default <first run>/curves.png)")
     args = ap.parse_args(argv)

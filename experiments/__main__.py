@@ -68,7 +68,7 @@ def resolve_scale(scale: str) -> str:
 
 def seeds_of(args, grid) -> List[int]:
     if args.seed_list is not None:
-        return args.seed_list
+        return list(dict.fromkeys(args.seed_list))   # a seed given twice is one run
     n = grid.default_seeds(args.scale) if args.seeds is None else args.seeds
     if n < 1:
         raise ConfigError(f"--seeds must be at least 1, got {n}")
@@ -100,6 +100,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 2
     command = f"{PROG} run {grid.name} --scale {args.scale} --seed-list " \
               f"{' '.join(map(str, seeds))} --out {shlex.quote(str(out))}"
+    conflicts = [f"{spec.label}: {state}" for spec in specs
+                 if (state := run_state(spec)).startswith("conflict")]
+    if conflicts and (args.command == "report" or len(conflicts) == len(specs)):
+        # Most often another scale's sweep in the same folder: a report would mislabel it.
+        print(f"{PROG}: error: {out} holds runs with other settings than {grid.name} at scale "
+              f"{args.scale} ({conflicts[0]}); give --scale or --out", file=sys.stderr)
+        return 2
     if args.command == "report":
         if not out.is_dir():
             print(f"{PROG}: error: no sweep at {out} (run it first, or give --out)",

@@ -6,6 +6,8 @@ Definitions (the tests check them by hand):
   the rolling mean of the last finished episodes, so this is "the mean return at the end");
 - a configuration's ``final_<x>_mean`` / ``_std`` / ``_min`` / ``_max`` are over its seeds'
   final values; std is the sample standard deviation (ddof = 1; empty for one seed);
+- ``early_return_mean`` is the mean over seeds of each seed's ``episode_return`` at the first
+  logged row at or after a quarter of its last update (for "learns faster early" findings);
 - rate columns (``updates_per_s``, ``env_steps_per_s``) and ``sampled_reward_mean`` are the
   mean over seeds of each seed's mean over its rows; ``updates``, ``wall_time_s`` and
   ``replay_ratio`` are the mean over seeds of each seed's last value;
@@ -32,7 +34,7 @@ SUMMARY_COLUMNS = (
     "env_steps_per_s", "replay_ratio",
     "final_return_mean", "final_return_std", "final_return_min", "final_return_max",
     "final_length_mean", "final_eval_return_mean", "final_eval_return_std",
-    "sampled_reward_mean",
+    "early_return_mean", "sampled_reward_mean",
 )
 FINALS = {"return": "episode_return", "length": "episode_length", "eval_return": "eval_return"}
 
@@ -96,6 +98,16 @@ def last_finite(values: np.ndarray) -> float:
     return float(finite[-1]) if finite.size else math.nan
 
 
+def early_value(run: "SeedRun", col: str = "episode_return", share: float = 0.25) -> float:
+    """``col`` at the first row at or after ``share`` of the run's last update."""
+    updates, values = run.columns["update"], run.columns[col]
+    ok = np.isfinite(updates) & np.isfinite(values)
+    if not ok.any():
+        return math.nan
+    updates, values = updates[ok], values[ok]
+    return float(values[np.argmax(updates >= share * updates[-1])])
+
+
 def mean_finite(values: np.ndarray) -> float:
     finite = values[np.isfinite(values)]
     return float(finite.mean()) if finite.size else math.nan
@@ -152,6 +164,7 @@ def summarize_config(name: str, settings: str, runs: Sequence[SeedRun]) -> Dict[
             key = f"final_{short}_{k}"
             if key in SUMMARY_COLUMNS:
                 row[key] = v
+    row["early_return_mean"] = _mean([early_value(r) for r in runs])
     row["sampled_reward_mean"] = _mean([mean_finite(r.columns["sampled_reward"]) for r in runs])
     return row
 

@@ -406,6 +406,7 @@ def test_truncation_at_the_step_limit():
     (dict(task="rooms", num_rooms=100), "num_rooms"),
     (dict(room_size=0), "positive"),
     (dict(room_size=-4.0), "positive"),
+    (dict(room_size=float("inf")), "finite"),
     (dict(room_size=3.0), "at least"),
     (dict(max_episode_steps=0), "positive integer"),
     (dict(max_episode_steps=-5), "positive integer"),

@@ -21,6 +21,10 @@ SOLVE_CONFIGS = [
     dict(task="three-room", placement="any-room"),
     dict(task="rooms", num_rooms=5, placement="any-room"),
     dict(task="one-room", room_size=8.0, max_episode_steps=200),  # the smoke preset's task
+    # the smallest rooms with two doorways each: little space to put a boulder aside
+    dict(task="three-room", room_size=8.0),
+    dict(task="rooms", num_rooms=5, room_size=8.0, placement="any-room"),
+    dict(task="rooms", num_rooms=12),                # the most rooms the env accepts
 ]
 IDS = ["-".join(str(v) for v in c.values()) for c in SOLVE_CONFIGS]
 
@@ -54,7 +58,8 @@ def solve_rate(config: dict, seeds: range) -> tuple:
 
 @pytest.mark.parametrize("config", SOLVE_CONFIGS, ids=IDS)
 def test_expert_solves_every_task_within_the_step_limit(config):
-    rate, steps, limit = solve_rate(config, range(12))
+    # seeds 31 and 48 of three-room at room size 8 once left the expert no spot for a boulder
+    rate, steps, limit = solve_rate(config, [*range(10), 31, 48])
     assert rate >= 11 / 12, f"expert solved only {rate:.0%}"
     assert max(steps) < limit
 

@@ -214,10 +214,13 @@ def test_summary_matches_hand_computation(tmp_path):
     assert a["updates_per_s"] == pytest.approx(((8 + 12 + 10) / 3 + (20 + 30) / 2) / 2)
     assert a["replay_ratio"] == pytest.approx((0.10 + 0.25) / 2)
     assert a["sampled_reward_mean"] == pytest.approx(((0 + 0.1 + 0.2) / 3 + (0 + 0.5) / 2) / 2)
+    # early: first logged return at or after 25% of the last update (seed0 skips its empty cell)
+    assert a["early_return_mean"] == pytest.approx((0.2 + 0.0) / 2)
     b = summarize_config("b", "", runs["b"])
     assert b["final_return_mean"] == pytest.approx(0.3)
     assert math.isnan(b["final_return_std"])  # one seed: no sample std
     assert math.isnan(b["final_eval_return_mean"])
+    assert b["early_return_mean"] == pytest.approx(0.1)
 
 
 def test_curves_interpolate_seeds_on_a_common_grid():
@@ -338,3 +341,22 @@ def test_auto_scale_fits_the_machine():
 
     assert resolve_scale("auto") == ("paper" if torch.cuda.is_available() else "quick")
     assert [resolve_scale(s) for s in SCALES] == list(SCALES)
+
+
+def test_a_seed_given_twice_is_one_run():
+    from experiments.__main__ import build_parser, seeds_of
+
+    args = build_parser().parse_args(["run", "ablation", "--seed-list", "3", "0", "3", "1"])
+    assert seeds_of(args, load_grid("ablation")) == [3, 0, 1]
+
+
+def test_report_refuses_runs_of_another_scale(tmp_path, capsys):
+    from experiments.__main__ import main
+
+    for spec in load_grid("ablation").expand("quick", tmp_path, [0]):
+        spec.run_dir.mkdir(parents=True)
+        spec.cfg.to_json(spec.run_dir / "config.json")
+    assert main(["report", "ablation", "--scale", "paper", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "other settings" in err and "\n" not in err
+    assert not (tmp_path / "report.md").exists()

@@ -6,6 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from PIL import Image
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -75,5 +76,42 @@ def test_corrupt_checkpoint_is_one_line(tmp_path):
     bad.write_bytes(b"not a checkpoint")
     res = play("--checkpoint", str(bad), "--out", str(tmp_path / "x.gif"))
     assert res.returncode == 2
+    assert len(res.stderr.strip().splitlines()) == 1 and "checkpoint" in res.stderr
+    assert not (tmp_path / "x.gif").exists()
+
+
+BAD_PLAY = [
+    (["--seed", "-1"], "--seed"),
+    (["--fps", "0"], "--fps"),
+    (["--epsilon", "2"], "--epsilon"),
+    (["--out", "NAME"], ".gif"),
+    (["--task", "cave"], "task"),
+]
+
+
+@pytest.mark.parametrize("argv,fragment", BAD_PLAY, ids=[" ".join(a) for a, _ in BAD_PLAY])
+def test_bad_play_flags_are_one_line_before_recording(tmp_path, argv, fragment):
+    argv = [a.replace("NAME", str(tmp_path / "no_extension")) for a in argv]
+    if "--out" not in argv:
+        argv += ["--out", str(tmp_path / "x.gif")]
+    res = play("--policy", "random", *argv)
+    assert res.returncode == 2, res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1 and fragment in res.stderr
+    assert not list(tmp_path.iterdir())          # nothing written
+
+
+@pytest.mark.parametrize("content", [
+    {"format": 1, "updater": {"online": {}}},                               # no config
+    {"format": 1, "updater": {"online": {}}, "config": {"task": "one-room"}},
+    {"format": 1, "updater": {"online": {}},                                # weights missing
+     "config": {"task": "one-room", "frame_stack": 1, "history_len": 20}},
+])
+def test_checkpoint_with_missing_parts_is_one_line(tmp_path, content):
+    import torch
+
+    bad = tmp_path / "checkpoint.pt"
+    torch.save(content, bad)
+    res = play("--checkpoint", str(bad), "--out", str(tmp_path / "x.gif"))
+    assert res.returncode == 2, res.stderr
     assert len(res.stderr.strip().splitlines()) == 1 and "checkpoint" in res.stderr
     assert not (tmp_path / "x.gif").exists()

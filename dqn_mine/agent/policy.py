@@ -35,7 +35,11 @@ class AgentPolicy:
         state = ckpt.load(path)
         cfg = state["config"]
         net = DuelingQNetwork(frame_stack=cfg["frame_stack"], history_len=cfg["history_len"])
-        net.load_state_dict(state["updater"]["online"])
+        try:
+            net.load_state_dict(state["updater"]["online"])
+        except (RuntimeError, TypeError) as exc:  # wrong or damaged tensors
+            raise ckpt.CheckpointError(f"{path}: the network weights do not fit "
+                                       f"({str(exc).splitlines()[0]})") from None
         return cls(net, cfg["frame_stack"], cfg["history_len"], epsilon, seed)
 
     def reset(self) -> None:

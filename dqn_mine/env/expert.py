@@ -169,20 +169,19 @@ class Expert:
                 and not env.layout.crosses_wall(env.agent_x, env.agent_z, x, z))
 
     def _aside_spot(self) -> tuple[float, float]:
-        """The free cell of this room nearest to the agent that lies far from every doorway."""
+        """The free cell of this room nearest to the agent that lies far from every doorway:
+        2 units beyond the drop clearance if the room has such a cell, else closer (small rooms
+        with two doorways may not), never nearer than the clearance itself."""
         env = self.env
         grid = self._grid(self.room)
-        best, best_d = None, math.inf
-        for (i, j) in grid.free:
-            x, z = grid.center(i, j)
-            if all(math.hypot(x - d.center[0], z - d.center[1]) >= ASIDE_CLEARANCE + 2.0
-                   for d in env.layout.doors):
-                dist = math.hypot(x - env.agent_x, z - env.agent_z)
-                if dist < best_d:
-                    best, best_d = (x, z), dist
-        if best is None:  # pragma: no cover - rooms are at least 8 units wide
-            raise RuntimeError("no room to put a boulder aside")
-        return best
+        cells = [grid.center(i, j) for (i, j) in grid.free]
+        for margin in (2.0, 1.0, 0.0):
+            far = [(x, z) for x, z in cells
+                   if all(math.hypot(x - d.center[0], z - d.center[1]) >= ASIDE_CLEARANCE + margin
+                          for d in env.layout.doors)]
+            if far:
+                return min(far, key=lambda c: math.hypot(c[0] - env.agent_x, c[1] - env.agent_z))
+        raise RuntimeError("no room to put a boulder aside")
 
     def _stand_point(self, target: Entity) -> tuple[float, float]:
         """A free spot in this room from which the agent faces ``target`` within reach."""

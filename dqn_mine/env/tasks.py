@@ -25,6 +25,7 @@ Curriculum phases of ``three-room`` (1 is the full task; the study trained 6 fir
 
 from __future__ import annotations
 
+import math
 import numbers
 from dataclasses import dataclass
 from typing import Callable
@@ -32,7 +33,9 @@ from typing import Callable
 from dqn_mine.env.entities import KIT, MINER, Entity
 from dqn_mine.env.mine import MIN_ROOM_SIZE, MineEnv
 
-MAX_ROOMS = 16
+# The expert solves every episode within the 2,000-step limit up to 12 rooms (measured: at most
+# 1,363 steps over 40 seeds each of 6-12 rooms); at 16 rooms some episodes need more.
+MAX_ROOMS = 12
 PLACEMENTS = ("fixed", "any-room")
 
 
@@ -149,8 +152,8 @@ class MineRescueEnv(MineEnv):
         self.task = task
         self.num_rooms = _check_rooms(spec, num_rooms)
         if (not isinstance(room_size, numbers.Real) or isinstance(room_size, bool)
-                or not room_size > 0):
-            raise ValueError(f"room_size must be a positive number, got {room_size!r}")
+                or not 0 < room_size < math.inf):
+            raise ValueError(f"room_size must be a positive finite number, got {room_size!r}")
         if room_size < MIN_ROOM_SIZE:
             raise ValueError(f"room_size must be at least {MIN_ROOM_SIZE:g} to hold the entities, "
                              f"got {room_size!r}")

@@ -220,7 +220,9 @@ class Actor:
                 time.sleep(0.05)
                 continue
             self.evaluate(self.cfg.eval_episodes)
-            next_at += self.cfg.eval_every
+            # From now, not from the missed mark: a long evaluation (many actors stepping
+            # meanwhile) must not leave a backlog that keeps the evaluator busy for good.
+            next_at = max(next_at, self.control.total_actor_steps()) + self.cfg.eval_every
         self.close()
 
     def evaluate(self, episodes: int) -> None:

@@ -41,6 +41,9 @@ def load(path: Path, map_location: str = "cpu") -> dict:
     except Exception as exc:
         raise CheckpointError(f"checkpoint {path} is unreadable ({type(exc).__name__}); "
                               "it may be truncated or corrupt") from None
-    if not isinstance(state, dict) or state.get("format") != FORMAT or "updater" not in state:
+    if not isinstance(state, dict) or state.get("format") != FORMAT \
+            or not isinstance(state.get("updater"), dict) or "online" not in state["updater"] \
+            or not isinstance(state.get("config"), dict) \
+            or not {"frame_stack", "history_len"} <= set(state["config"]):
         raise CheckpointError(f"{path} is not a dqn_mine checkpoint")
     return state

@@ -141,7 +141,8 @@ class InlineActors:
     def _maybe_evaluate(self, actor: Actor) -> None:
         if self.control.total_actor_steps() >= self.next_eval:
             actor.evaluate(self.cfg.eval_episodes)
-            self.next_eval += self.cfg.eval_every
+            self.next_eval = max(self.next_eval, self.control.total_actor_steps()) \
+                + self.cfg.eval_every
 
     def check(self) -> None:
         pass

@@ -18,8 +18,8 @@ SCALES = {
 FINDING = ("Frame stacking or action history learn faster early than neither; both end similar; "
            "combining them adds nothing.")
 CLAIMS = [
-    ("action history ahead of neither", "final_return_mean", "history-20", ">", "neither"),
-    ("frame stack ahead of neither", "final_return_mean", "stack-4", ">", "neither"),
+    ("action history ahead of neither early", "early_return_mean", "history-20", ">", "neither"),
+    ("frame stack ahead of neither early", "early_return_mean", "stack-4", ">", "neither"),
     ("action history and frame stack end similar", "final_return_mean",
      "history-20", "~", "stack-4"),
     ("both ends similar to action history alone", "final_return_mean", "both", "~", "history-20"),
