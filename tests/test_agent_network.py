@@ -65,3 +65,23 @@ def test_empty_history_slots_differ_from_any_action():
     outs = [net(obs, torch.tensor([[a]], dtype=torch.int8), carrying) for a in range(-1, 6)]
     for a in range(1, 7):
         assert not torch.allclose(outs[0], outs[a])
+
+
+def test_bfloat16_weights_give_close_q_values_and_the_same_greedy_actions():
+    """Actors may act with a bfloat16 copy of the network (--actor-precision): the input is
+    converted to the weights' dtype inside, and the Q-values stay within bfloat16's precision."""
+    torch.manual_seed(0)
+    net = DuelingQNetwork().eval()
+    low = DuelingQNetwork().eval()
+    low.load_state_dict(net.state_dict())
+    low.to(torch.bfloat16)
+    obs, history, carrying = inputs(64)
+    with torch.inference_mode():
+        q32, q16 = net(obs, history, carrying), low(obs, history, carrying)
+    assert q16.dtype == torch.bfloat16 and q32.dtype == torch.float32
+    scale = q32.abs().max().item()
+    assert (q16.float() - q32).abs().max().item() < 0.02 * scale
+    margin = q32.topk(2, dim=1).values.diff(dim=1).abs().squeeze(1)   # best minus second best
+    clear = margin > 0.05 * scale                   # rounding cannot swap a clear winner
+    assert clear.sum() > 16
+    assert torch.equal(q16.float().argmax(1)[clear], q32.argmax(1)[clear])

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from dqn_mine.config import (PRESETS, Config, ConfigError, build_parser, parse_args,
-                             resolve_device, to_argv)
+from dqn_mine.config import (PRESETS, Config, ConfigError, build_parser, native_bf16,
+                             parse_args, resolve_actor_precision, resolve_device, to_argv)
 
 
 def test_defaults_are_the_studys():
@@ -81,6 +81,7 @@ BAD = [
      "--placement fixed"),
     (["--task", "cave"], "invalid choice"),
     (["--device", "tpu"], "invalid choice"),
+    (["--actor-precision", "float16"], "invalid choice"),
     (["--placement", "anywhere"], "invalid choice"),
     (["--preset", "huge"], "unknown preset"),
     (["--actors", "two"], "invalid int"),
@@ -197,6 +198,20 @@ def test_resolve_device():
         assert resolve_device("auto").type == "cpu"
         with pytest.raises(ConfigError, match="no CUDA"):
             resolve_device("cuda")
+
+
+def test_resolve_actor_precision(tmp_path):
+    assert resolve_actor_precision("float32", 32) == torch.float32
+    assert resolve_actor_precision("bfloat16", 1) == torch.bfloat16    # asked for: always
+    assert resolve_actor_precision("auto", 4) == torch.float32        # too few frames per forward
+    assert resolve_actor_precision("auto", 8) == (torch.bfloat16 if native_bf16()
+                                                  else torch.float32)
+    cpu = tmp_path / "cpuinfo"
+    cpu.write_text("flags\t\t: fpu sse2 avx2 avx512f avx512bw\n")   # AVX-512 without BF16
+    assert not native_bf16(str(cpu))
+    cpu.write_text("flags\t\t: fpu sse2 avx2 avx512f avx512_bf16 amx_tile\n")
+    assert native_bf16(str(cpu)) == torch.backends.mkldnn.is_available()
+    assert not native_bf16(str(tmp_path / "missing"))
 
 
 def test_learner_threads():

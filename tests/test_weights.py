@@ -54,6 +54,18 @@ def test_publish_then_pull_in_process(net_and_blocks):
     assert torch.equal(reader(*probe()), net(*probe()))
 
 
+def test_pull_converts_into_a_bfloat16_reader(net_and_blocks):
+    """An actor acting in bfloat16 reads the float32 vector into its bfloat16 tensors."""
+    net, blocks = net_and_blocks
+    broadcast = WeightBroadcast(blocks)
+    broadcast.publish(net)
+    reader = DuelingQNetwork().to(torch.bfloat16)
+    assert broadcast.pull(reader, -1) == 1
+    for ours, theirs in zip(reader.state_dict().values(), net.state_dict().values()):
+        assert ours.dtype == torch.bfloat16
+        assert torch.equal(ours, theirs.to(torch.bfloat16))
+
+
 class InterruptedReader(WeightBroadcast):
     """A reader whose first copy is interleaved with a whole publish by the learner."""
 

@@ -62,11 +62,15 @@ class DuelingQNetwork(nn.Module):
 
     def forward(self, obs: torch.Tensor, history: torch.Tensor,
                 carrying: torch.Tensor) -> torch.Tensor:
-        """obs uint8 [B, 3f, H, W], history int [B, h] (-1: none), carrying float [B] -> Q [B, A]"""
-        x = self.conv(obs.float() / 255.0)  # [B, 768]
-        parts = [x, carrying.float().reshape(-1, 1)]  # carrying: [B, 1]
+        """obs uint8 [B, 3f, H, W], history int [B, h] (-1: none), carrying float [B] -> Q [B, A]
+
+        Computes in the dtype of the weights: float32, or bfloat16 in actors that act in it.
+        """
+        dtype = self.value[0].weight.dtype
+        x = self.conv(obs.to(dtype) / 255.0)  # [B, 768]
+        parts = [x, carrying.to(dtype).reshape(-1, 1)]  # carrying: [B, 1]
         if self.history_len > 0:
-            parts.append(one_hot_history(history, self.num_actions))  # [B, 6h]
+            parts.append(one_hot_history(history, self.num_actions).to(dtype))  # [B, 6h]
         features = torch.cat(parts, dim=1)  # [B, 768 + 6h + 1]
         value = self.value(features)  # [B, 1]
         advantage = self.advantage(features)  # [B, A]

@@ -3,7 +3,7 @@
 - learner: :class:`DQNUpdater` updates/s (forward on s and s', target, backward, Adam) at batch 32
   and 256, for each torch thread count up to the machine's cores, CPU and (when present) CUDA;
 - actor: batched ``inference_mode`` forward passes per second at batch 1, 4, 8, 16, 32 (one env
-  step per row), with one torch thread (what actor processes use).
+  step per row), with one torch thread (what actor processes use), float32 and bfloat16 weights.
 
 `python -m dqn_mine.bench --only learner [--quick]`.
 """
@@ -19,6 +19,7 @@ import torch
 
 from dqn_mine.agent.learning import DQNUpdater, batch_to_device
 from dqn_mine.agent.network import DuelingQNetwork
+from dqn_mine.config import native_bf16
 from dqn_mine.replay import Batch
 
 
@@ -78,9 +79,9 @@ def learner_rate(batch_size: int, device: str, seconds: float, warmup: int = 3) 
     return rate(lambda: updater.update(batch_to_device(host, device)), seconds, warmup, sync)
 
 
-def inference_rate(batch: int, seconds: float) -> float:
+def inference_rate(batch: int, seconds: float, dtype=torch.float32) -> float:
     torch.manual_seed(0)
-    net = DuelingQNetwork().eval()
+    net = DuelingQNetwork().to(dtype).eval()   # as an actor holds it (--actor-precision)
     data = synthetic_batch(batch)
     obs, hist, carrying = (torch.from_numpy(data.obs), torch.from_numpy(data.history),
                            torch.from_numpy(data.carrying))
@@ -127,11 +128,16 @@ def run(quick: bool = False) -> str:
                   "(Config.learner_threads 0 = auto); actors: 1 thread.\n"]
         torch.set_num_threads(1)
         lines += ["## Actor network (batched inference, 1 torch thread)\n",
-                  "| envs per forward | forwards/s | env steps/s | ms/forward |",
-                  "|---|---|---|---|"]
+                  f"bfloat16 weights (--actor-precision): this CPU computes bfloat16 "
+                  f"{'natively' if native_bf16() else 'by emulation'}.\n",
+                  "| envs per forward | float32 env steps/s | float32 us/frame | "
+                  "bfloat16 env steps/s | bfloat16 us/frame | bfloat16 / float32 |",
+                  "|---|---|---|---|---|---|"]
         for b in (1, 4, 8, 16, 32):
-            r = inference_rate(b, seconds)
-            lines.append(f"| {b} | {r:.0f} | {r * b:.0f} | {1000 / r:.2f} |")
+            r32 = inference_rate(b, seconds) * b
+            r16 = inference_rate(b, seconds, torch.bfloat16) * b
+            lines.append(f"| {b} | {r32:.0f} | {1e6 / r32:.0f} | {r16:.0f} | {1e6 / r16:.0f} | "
+                         f"{r16 / r32:.2f}x |")
     finally:
         torch.set_num_threads(saved_threads)
     return "\n".join(lines) + "\n"

@@ -16,19 +16,28 @@ from pathlib import Path
 
 import numpy as np
 
+from dqn_mine.config import resolve_actor_precision
 from dqn_mine.metrics import read_metrics
 
-ENV = dict(task="one-room", room_size=8.0, max_episode_steps=200)  # the smoke preset's task
-# (actors, envs per actor). More envs per actor amortise the batched forward pass: on one core the
-# network costs ~540 us for 1 frame but ~110 us per frame at 16 (bench.learner's inference table).
-CONFIGS = ((1, 1), (1, 4), (1, 16), (2, 1), (2, 8))
+# name -> (environment, configurations (actors, envs per actor, --actor-precision)). More envs per
+# actor amortise the batched forward pass (bench.learner's inference table); from 8 envs per
+# actor, actors act in bfloat16 where the CPU has it (auto). The float32 row is the reference.
+TASKS = {
+    "the smoke-preset task (one-room 8x8, 200-step limit)": (
+        dict(task="one-room", room_size=8.0, max_episode_steps=200),
+        ((1, 1, "auto"), (1, 4, "auto"), (1, 16, "auto"), (1, 32, "auto"), (2, 1, "auto"),
+         (2, 8, "auto"), (2, 16, "float32"), (2, 16, "auto"))),
+    "the study's task (two-room, 16x16 rooms, 2,000-step limit)": (
+        dict(task="two-room", room_size=16.0, max_episode_steps=None),
+        ((2, 16, "float32"), (2, 16, "auto"))),
+}
 
 
-def bare_env_steps_per_s(seconds: float) -> float:
+def bare_env_steps_per_s(env_kwargs: dict, seconds: float) -> float:
     """Random actions in one process, resets included."""
     from dqn_mine.env import MineRescueEnv
 
-    env = MineRescueEnv(**ENV)
+    env = MineRescueEnv(**env_kwargs)
     env.reset(seed=0)
     rng = np.random.default_rng(0)
     steps, start = 0, time.perf_counter()
@@ -43,12 +52,16 @@ def bare_env_steps_per_s(seconds: float) -> float:
     return rate
 
 
-def pipeline(actors: int, envs_per_actor: int, updates: int) -> dict:
-    """Steady-state figures of a short smoke-preset training run."""
+def pipeline(env_kwargs: dict, actors: int, envs_per_actor: int, precision: str,
+             updates: int) -> dict:
+    """Steady-state figures of a short smoke-preset training run on the environment given."""
+    env_flags = [f"--{k.replace('_', '-')}={'none' if v is None else v}"
+                 for k, v in env_kwargs.items()]
     with tempfile.TemporaryDirectory() as tmp:
         run_dir = Path(tmp) / "run"
-        cmd = [sys.executable, "-m", "dqn_mine.train", "--preset", "smoke", "--actors",
+        cmd = [sys.executable, "-m", "dqn_mine.train", "--preset", "smoke", *env_flags, "--actors",
                str(actors), "--envs-per-actor", str(envs_per_actor), "--updates", str(updates),
+               "--actor-precision", precision,
                "--prefill", "500", "--replay-capacity", "65536", "--eval-every", "0",
                "--log-interval", str(max(1, updates // 10)), "--no-progress",
                "--run-dir", str(run_dir)]
@@ -63,25 +76,24 @@ def pipeline(actors: int, envs_per_actor: int, updates: int) -> dict:
 
 
 def run(quick: bool = False) -> str:
-    bare = bare_env_steps_per_s(3.0 if quick else 10.0)
     updates = 300 if quick else 1500
-    lines = [
-        "## System: actors into the replay while the learner trains (CPU)",
-        "",
-        f"Smoke-preset task (one-room 8x8, 200-step limit), learner on CPU with batch 32, "
-        f"{updates} updates per configuration. Bare environment, one process, random actions: "
-        f"**{bare:,.0f} steps/s**.",
-        "",
-        "| actors x envs | transitions/s into replay | vs bare env | learner updates/s | "
-        "replay ratio |",
-        "|---|---:|---:|---:|---:|",
-    ]
-    for actors, envs in CONFIGS:
-        fig = pipeline(actors, envs, updates)
-        lines.append(f"| {actors} x {envs} | {fig['steps_per_s']:,.0f} | "
-                     f"{fig['steps_per_s'] / bare:.2f}x | {fig['updates_per_s']:.1f} | "
-                     f"{fig['replay_ratio']:.4f} |")
-    return "\n".join(lines) + "\n"
+    lines = ["## System: actors into the replay while the learner trains (CPU)", "",
+             f"Learner on CPU with batch 32, {updates} updates per configuration, smoke preset "
+             "otherwise. Bare environment: one process, random actions, resets included.", ""]
+    for name, (env_kwargs, configs) in TASKS.items():
+        bare = bare_env_steps_per_s(env_kwargs, 3.0 if quick else 10.0)
+        lines += [f"On {name}: bare environment **{bare:,.0f} steps/s**.", "",
+                  "| actors x envs | actor precision | transitions/s into replay | vs bare env | "
+                  "learner updates/s | replay ratio |",
+                  "|---|---|---:|---:|---:|---:|"]
+        for actors, envs, precision in configs:
+            fig = pipeline(env_kwargs, actors, envs, precision, updates)
+            dtype = str(resolve_actor_precision(precision, envs)).replace("torch.", "")
+            lines.append(f"| {actors} x {envs} | {dtype} | {fig['steps_per_s']:,.0f} | "
+                         f"{fig['steps_per_s'] / bare:.2f}x | {fig['updates_per_s']:.1f} | "
+                         f"{fig['replay_ratio']:.4f} |")
+        lines.append("")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ from typing import List, Optional
 
 import numpy as np
 
-from dqn_mine.config import Config
+from dqn_mine.config import Config, resolve_actor_precision
 
 
 @dataclass(frozen=True)
@@ -65,7 +65,8 @@ class Actor:
         self.torch = torch
         self.rng = np.random.default_rng(spec.seed)
         self.net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
-        self.net.eval()
+        # Pulled float32 weights are converted on load (WeightBroadcast copies into the tensors).
+        self.net.to(resolve_actor_precision(cfg.actor_precision, spec.num_envs)).eval()
         self.version = -1
         self.pull_weights()
         render = {} if spec.streams else {"render_mode": "rgb_array"}  # evaluation videos
@@ -141,7 +142,7 @@ class Actor:
         with torch.inference_mode():
             q = self.net(torch.from_numpy(stacks), torch.from_numpy(histories),
                          torch.from_numpy(carrying))
-        return q.numpy()                                            # [E, A]
+        return q.float().numpy()                                    # [E, A], float32
 
     def step(self) -> int:
         """One step of every environment; returns the number of env steps taken."""

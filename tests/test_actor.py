@@ -1,0 +1,44 @@
+"""An actor in this process: it acts with the broadcast weights in the precision it was given."""
+
+import dataclasses
+
+import torch
+
+from dqn_mine.agent.network import DuelingQNetwork
+from dqn_mine.config import PRESETS, Config
+from dqn_mine.replay import ReplayStorage
+from dqn_mine.system.actor import Actor, actor_specs
+from dqn_mine.system.control import Control
+from dqn_mine.system.layout import replay_layout, run_block_specs
+from dqn_mine.system.shared import SharedBlocks
+from dqn_mine.system.weights import WeightBroadcast
+
+
+def test_bfloat16_actor_acts_on_the_published_weights():
+    cfg = dataclasses.replace(Config(**PRESETS["smoke"], preset="smoke"), actors=1,
+                              envs_per_actor=2, replay_capacity=4096, eval_every=0,
+                              actor_precision="bfloat16").validate()
+    torch.manual_seed(0)
+    learner_net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
+    with SharedBlocks.create(run_block_specs(cfg, learner_net)) as blocks:
+        weights = WeightBroadcast(blocks)
+        weights.publish(learner_net)
+        actor = Actor(cfg, actor_specs(cfg)[0], ReplayStorage(replay_layout(cfg), blocks),
+                      Control(blocks), weights)
+        try:
+            assert actor.version == 1
+            assert {p.dtype for p in actor.net.parameters()} == {torch.bfloat16}
+            for _ in range(30):
+                actor.step()
+            q = actor.q_values(actor.stacks, actor.histories, actor.carrying)      # [E, A]
+            with torch.inference_mode():
+                expected = learner_net(torch.from_numpy(actor.stacks),
+                                       torch.from_numpy(actor.histories),
+                                       torch.from_numpy(actor.carrying)).numpy()
+            assert q.dtype == expected.dtype and q.shape == (2, 6)
+            assert abs(q - expected).max() < 0.02 * abs(expected).max()
+            assert actor.steps == 60
+            actor.close()                                  # flushes the writers
+            assert actor.writers[0].storage.total_written() == 60
+        finally:
+            actor.close()
