@@ -119,32 +119,54 @@ def test_sample_into_preallocated_batch(storage):
     assert batch is out and out.obs.shape == (16, 2) and out.history.shape == (16, 2)
 
 
-def test_a_writer_lapping_a_sampled_window_zeroes_its_weight():
+@pytest.fixture
+def lapped_stream():
+    """One 20-slot stream (n = 2) after 30 steps of one episode, ingested: 31 frames written
+    (cursor 31), transitions 0 .. 27 published (Q(s_30) bootstraps 28), frames 0 .. 10 lapped:
+    transitions 11 .. 27 alive, in slots 11 .. 19 and 0 .. 7."""
     layout = ReplayLayout(num_streams=1, stream_capacity=20, frame_shape=(1,), history_len=0,
                           n_step=2)
     with SharedBlocks.create(layout.block_specs()) as blocks:
         s = ReplayStorage(layout, blocks)
         w = NStepWriter(s, 0, flush_every=1)
         w.begin_episode(np.zeros(1, np.uint8), 0.0)
-        q = np.zeros(6, np.float32)
         for _ in range(30):
-            w.append(q, 0, 1.0, np.zeros(1, np.uint8), 0.0)
+            w.append(Q0, 0, 1.0, np.zeros(1, np.uint8), 0.0)
         replay = PrioritizedReplay(s, zeta=0.0, seed=0)
         replay.ingest()
-        # 31 frames written (cursor 31), transitions 0 .. 27 published (Q(s_30) bootstraps 28),
-        # frames 0 .. 10 lapped: transitions 11 .. 27 alive, in slots 11 .. 19 and 0 .. 7
-        assert len(replay) == 17
-        for _ in range(30, 35):                    # the writer laps 5 more frames, no ingest
-            w.append(q, 0, 1.0, np.zeros(1, np.uint8), 0.0)
-        batch = replay.sample(200, 1.0)
-        t_of = np.where(batch.indices >= 11, batch.indices, batch.indices + 20)
-        stale = t_of < 36 - 20                     # cursor 36: frames before 16 overwritten
-        assert stale.any() and (~stale).any()
-        np.testing.assert_array_equal(batch.weights == 0, stale)
-        assert len(replay) == 17 - len(np.unique(batch.indices[stale]))
-        assert replay.ingest() == 33 - 28          # the 5 new ones; the lapped already gone
-        assert len(replay) == 33 - 16
-        del s, w, replay, batch
+        yield s, w, replay
+        del s, w, replay
+
+
+Q0 = np.zeros(6, np.float32)
+
+
+def test_a_writer_lapping_a_sampled_window_zeroes_its_weight(lapped_stream):
+    s, w, replay = lapped_stream
+    assert len(replay) == 17
+    for _ in range(30, 35):                        # the writer laps 5 more frames, no ingest
+        w.append(Q0, 0, 1.0, np.zeros(1, np.uint8), 0.0)
+    batch = replay.sample(200, 1.0)
+    t_of = np.where(batch.indices >= 11, batch.indices, batch.indices + 20)
+    stale = t_of < 36 - 20                         # cursor 36: frames before 16 overwritten
+    assert stale.any() and (~stale).any()
+    np.testing.assert_array_equal(batch.weights == 0, stale)
+    assert len(replay) == 17 - len(np.unique(batch.indices[stale]))
+    assert replay.ingest() == 33 - 28              # the 5 new ones; the lapped already gone
+    assert len(replay) == 33 - 16
+
+
+def test_a_lap_that_ends_an_episode_never_gives_action_minus_one(lapped_stream):
+    """A lapped slot may hold an episode's final frame (action -1, starts no transition) by the
+    time it is gathered: weight 0 and a valid action index, or the learner's gather crashes."""
+    s, w, replay = lapped_stream
+    for t in range(30, 35):                        # frame 35 ends the episode in slot 15
+        w.append(Q0, 0, 1.0, np.zeros(1, np.uint8), 0.0, t == 34, False)
+    assert s.action[15] == -1
+    batch = replay.sample(200, 1.0)
+    assert (batch.indices == 15).any()
+    assert (batch.weights[batch.indices == 15] == 0).all()
+    assert ((batch.action >= 0) & (batch.action < 6)).all()
 
 
 def test_beta_schedule():

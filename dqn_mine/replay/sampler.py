@@ -202,11 +202,16 @@ class PrioritizedReplay:
         # w_i = (N P_i)^-beta / max_j (N P_j)^-beta = (p_i / p_min)^-beta
         p /= self.min_tree.min()
         np.power(p, -beta, out=out.weights, casting="same_kind")
-        self._drop_overwritten(idx, out.weights)
+        stale = self._drop_overwritten(idx, out.weights)
+        if stale is not None:
+            # A lapped slot may now start no transition (action -1): its weight is 0, so any
+            # valid action will do, but an index of -1 would crash the learner's gather.
+            out.action[stale] = np.maximum(out.action[stale], 0)
         return out
 
-    def _drop_overwritten(self, idx: np.ndarray, weights: np.ndarray) -> None:
+    def _drop_overwritten(self, idx: np.ndarray, weights: np.ndarray) -> Optional[np.ndarray]:
         """A writer may have lapped a sampled window while we gathered it: weight and priority 0.
+        Returns the mask of such samples (None when there are none).
 
         Sampled slot ``i`` of stream ``k`` held frame number ``t`` with ``alive_from[k] <= t <
         alive_from[k] + M`` at the last ingest; it is stale once ``cursor[k] - M + lag > t``, so
@@ -215,15 +220,17 @@ class PrioritizedReplay:
         m = self._m
         lapped = self.storage.counters[:, CURSOR] - (m - self._lag) - self._alive_from   # [S]
         if not (lapped > 0).any():
-            return
+            return None
         stream = idx // m
         stale = (idx - self._alive_from.take(stream)) % m < lapped.take(stream)
-        if stale.any():
-            weights[stale] = 0.0
-            gone = np.unique(idx[stale])
-            gone = gone[self.sum_tree[gone] > 0]
-            self._live -= gone.size
-            self._set(gone, np.zeros(gone.size))
+        if not stale.any():
+            return None
+        weights[stale] = 0.0
+        gone = np.unique(idx[stale])
+        gone = gone[self.sum_tree[gone] > 0]
+        self._live -= gone.size
+        self._set(gone, np.zeros(gone.size))
+        return stale
 
     def update_priorities(self, indices, td_abs, stamps=None) -> None:
         """Queue p = |delta| + eta for sampled slots. Applied at the next :meth:`ingest` or
