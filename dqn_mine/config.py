@@ -445,9 +445,9 @@ def native_bf16(cpuinfo: str = "/proc/cpuinfo") -> bool:
 def resolve_actor_precision(name: str, envs: int):
     """The dtype of an actor's network, which steps ``envs`` environments per forward pass.
 
-    Measured (bench.learner, AVX512-BF16 core): bfloat16 weights cost 0.84x float32's time per
-    frame at 8 frames per forward, 0.78x at 16 and 0.45x at 32, but 1.2x at 1 and about the same
-    at 4; hence ``auto`` = bfloat16 where native and at least 8 environments per forward.
+    Measured (bench.learner, AVX512-BF16 core, README table): bfloat16 weights cost 0.91x
+    float32's time per frame at 8 frames per forward, 0.79x at 16 and 0.72x at 32, but 1.18x at 1
+    and 0.94x at 4; hence ``auto`` = bfloat16 where native and at least 8 environments per forward.
     """
     import torch
 
