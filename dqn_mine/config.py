@@ -33,6 +33,7 @@ ACTOR_PRECISIONS = ("auto", "float32", "bfloat16")
 EPSILON_SCHEDULES = ("fixed", "apex")
 INIT_PRIORITIES = ("actor", "max")
 CURRICULA = ("none", "adaptive", "schedule")
+EXPLORATIONS = ("epsilon", "ez")
 
 
 class ConfigError(ValueError):
@@ -70,8 +71,13 @@ class Config:
     actors: int = _f(7, "number of actor processes")
     envs_per_actor: int = _f(1, "environments per actor, stepped with one batched forward pass")
     epsilon: float = _f(0.01, "exploration rate of every actor (fixed schedule)")
-    epsilon_schedule: str = _f("fixed", "fixed: every actor uses --epsilon; apex: actor i uses "
-                               "0.4**(1+7i/(N-1))", EPSILON_SCHEDULES)
+    epsilon_schedule: str = _f("fixed", "fixed: every actor uses --epsilon; apex: env i of the "
+                               "N actor envs uses 0.4**(1+7i/(N-1))", EPSILON_SCHEDULES)
+    exploration: str = _f("epsilon", "epsilon: a uniform random action with prob. epsilon; ez: "
+                          "with prob. epsilon start a random action held for a zeta-distributed "
+                          "duration (motions only)", EXPLORATIONS)
+    ez_mu: float = _f(2.0, "ez exploration: durations n drawn with p(n) ~ n**-mu")
+    ez_max_duration: int = _f(100, "ez exploration: longest duration of a held random action")
     prefill: int = _f(50_000, "environment steps per actor before the learner starts")
     actor_precision: str = _f("auto", "actors' network weights: bfloat16 (faster where the CPU "
                               "computes it natively), float32, or auto (bfloat16 where native "
@@ -192,6 +198,22 @@ PRESETS: Dict[str, Dict[str, Any]] = {
         "lr": 2e-4, "target_update_interval": 500, "publish_interval": 100,
         "checkpoint_interval": 5000, "log_interval": 250,
     },
+    # The full two-room task (16 x 16 rooms, 1,000 steps) on a few-core CPU machine. Changes from
+    # the study's defaults, each for the hour there is:
+    # - 2 actors x 16 envs (one batched forward each): the fastest acting measured on 2 cores;
+    # - the Ape-X epsilons, one per environment (0.4 down to 0.0007 over 32), with ez
+    #   exploration: the exploration that reaches the most sub-goals of two-room in the explore
+    #   benchmark (it still finds no reward there; see docs/exploration.md);
+    # - pre-fill 20,000 steps per actor and a 262,144-slot replay: the hour holds ~100k updates,
+    #   not the study's 1e6, so the replay turns over in about the same number of updates;
+    # - lr 1e-4, target sync every 1,000 updates, weights every 250: fewer updates to learn in.
+    "cpu": {
+        "task": "two-room", "actors": 2, "envs_per_actor": 16,
+        "epsilon_schedule": "apex", "exploration": "ez",
+        "prefill": 20_000, "replay_capacity": 262_144, "updates": 100_000,
+        "lr": 1e-4, "target_update_interval": 1000, "publish_interval": 250,
+        "checkpoint_interval": 10_000, "log_interval": 500,
+    },
 }
 
 
@@ -201,7 +223,7 @@ def _problems(c: Config) -> List[str]:
     """Every impossible setting, as one-line messages (first one is raised)."""
     p = []
     for name in ("task", "placement", "curriculum", "epsilon_schedule", "init_priority",
-                 "device", "actor_precision"):
+                 "device", "actor_precision", "exploration"):
         choices = _field(name).metadata["choices"]
         if getattr(c, name) not in choices:
             p.append(f"--{_flag(name)}: unknown value {getattr(c, name)!r} "
@@ -213,7 +235,7 @@ def _problems(c: Config) -> List[str]:
     at_least = {"actors": 1, "envs_per_actor": 1, "n_step": 1, "batch_size": 1, "frame_stack": 1,
                 "history_len": 0, "prefill": 0, "updates": 0, "target_update_interval": 1,
                 "publish_interval": 1, "learner_queue": 1, "learner_threads": 0, "eval_every": 0,
-                "eval_video_every": 0,
+                "eval_video_every": 0, "ez_max_duration": 1,
                 "eval_episodes": 1, "checkpoint_interval": 1, "log_interval": 1,
                 "curriculum_window": 1, "return_window": 1, "seed": 0}
     for name, low in at_least.items():
@@ -238,6 +260,8 @@ def _problems(c: Config) -> List[str]:
     for name in ("epsilon", "eval_epsilon"):
         if not 0.0 <= getattr(c, name) <= 1.0:
             p.append(f"--{_flag(name)} must be in [0, 1], got {getattr(c, name)}")
+    if not c.ez_mu > 1.0:
+        p.append(f"--ez-mu must be greater than 1, got {c.ez_mu}")
     if not c.lr > 0:
         p.append(f"--lr must be positive, got {c.lr}")
     if c.zeta < 0:

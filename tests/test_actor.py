@@ -43,3 +43,32 @@ def test_bfloat16_actor_acts_on_the_published_weights():
             assert actor.writers[0].storage.total_written() == 60
         finally:
             actor.close()
+
+
+def test_ez_actor_holds_random_motions_with_one_rate_per_env():
+    from dqn_mine.agent.learning import epsilon_for_actor
+
+    cfg = dataclasses.replace(Config(**PRESETS["smoke"], preset="smoke"), actors=2,
+                              envs_per_actor=3, replay_capacity=4096, eval_every=0,
+                              exploration="ez").validate()
+    specs = actor_specs(cfg)
+    # the Ape-X schedule runs over all 6 environments, not over the 2 processes
+    rates = [eps for spec in specs for eps in spec.epsilon]
+    assert rates == [epsilon_for_actor(k, 6) for k in range(6)]
+    net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
+    with SharedBlocks.create(run_block_specs(cfg, net)) as blocks:
+        weights = WeightBroadcast(blocks)
+        weights.publish(net)
+        actor = Actor(cfg, specs[0], ReplayStorage(replay_layout(cfg), blocks),
+                      Control(blocks), weights)
+        try:
+            assert actor.explorer.durations
+            assert list(actor.explorer.epsilon) == rates[:3]
+            held = 0
+            for _ in range(200):
+                actor.step()
+                held += int((actor.explorer.left > 0).sum())
+            assert held > 0, "env 0 (epsilon 0.4) must start runs that last several steps"
+            assert actor.steps == 600
+        finally:
+            actor.close()

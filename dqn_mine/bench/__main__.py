@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-SECTIONS = ["env", "replay", "learner", "system"]
+SECTIONS = ["env", "replay", "learner", "system", "explore"]
 
 
 def machine_line() -> str:

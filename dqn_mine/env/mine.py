@@ -29,6 +29,16 @@ DOOR_HEIGHT = 2.3
 DOOR_WIDTH = 2.4
 REACH_AHEAD = AGENT_RADIUS + 0.5   # centre of the disc in which action 4 finds an item ...
 REACH_RADIUS = 0.6                 # ... and its radius
+# Delivery, after MiniWorld's mechanics: a carried item is held in front of the agent, at
+# 1.05 x (agent radius + item radius + one forward step) from its centre, and MiniWorld's
+# ``near()`` counts two entities as touching within their radii plus 1.1 forward steps. Action 4
+# hands the kit over when the held kit is near the miner in that sense (and no wall lies
+# between). This reaches further than "the miner in the pick-up reach" (the held kit is 1.42
+# ahead, so the miner may be up to 3.0 away), but it changes undirected exploration little:
+# one-room, 300 episodes, uniform random 0.3% -> 0.7% delivered, ez-uniform 0.7% both ways
+# (docs/exploration.md).
+CARRY_AHEAD_FACTOR = 1.05
+NEAR_STEPS = 1.1
 DROP_GAP = 0.1                     # space between the agent and an item it puts down
 DOOR_CLEARANCE = 2.5               # kit, miner and agent start at least this far from doorways
 ASIDE_CLEARANCE = 3.5              # boulders moved aside lie at least this far from doorways
@@ -223,6 +233,23 @@ class MineEnv(gym.Env):
                     best, best_d = e, d
         return best
 
+    def carry_position(self, item: Entity) -> tuple[float, float]:
+        """Where a carried ``item`` is held: in front of the agent (MiniWorld's carry position)."""
+        ahead = CARRY_AHEAD_FACTOR * (AGENT_RADIUS + item.radius + FORWARD_STEP)
+        return (self.agent_x + ahead * _COS[self.heading],
+                self.agent_z + ahead * _SIN[self.heading])
+
+    def delivers(self) -> bool:
+        """Whether action 4 now hands the kit to the miner: the held kit is near the miner."""
+        held = self.carrying
+        if held is None or held.kind != KIT:
+            return False
+        miner = self.miner
+        x, z = self.carry_position(held)
+        touch = held.radius + miner.radius + NEAR_STEPS * FORWARD_STEP
+        return ((x - miner.x) ** 2 + (z - miner.z) ** 2 < touch * touch
+                and not self.layout.crosses_wall(self.agent_x, self.agent_z, miner.x, miner.z))
+
     # --- actions -----------------------------------------------------------------------------
 
     def _move(self, dist: float) -> None:
@@ -233,10 +260,10 @@ class MineEnv(gym.Env):
 
     def _interact(self) -> bool:
         """Deliver, pick up, exchange or drop; True on delivery."""
+        if self.delivers():
+            return True
         target = self.facing()
         held = self.carrying
-        if held is not None and held.kind == KIT and target is not None and target.kind == MINER:
-            return True
         if target is not None and target.movable:
             if held is not None:  # exchange: the held item takes the target's place
                 if not self.item_fits(held, target.x, target.z, ignore=target):

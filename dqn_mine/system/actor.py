@@ -25,7 +25,7 @@ class ActorSpec:
 
     index: int                   # row in the control block
     streams: tuple               # replay streams written, one per env (empty: evaluation actor)
-    epsilon: float
+    epsilon: object              # one rate for every env, or a tuple with one per env
     seed: int
     env_kwargs: dict
     num_envs: int = 1
@@ -50,6 +50,7 @@ class Actor:
                  parent_pid: Optional[int] = None):
         import torch
 
+        from dqn_mine.agent.explore import Explorer
         from dqn_mine.agent.network import DuelingQNetwork
         from dqn_mine.env import MineRescueEnv
         from dqn_mine.replay import NStepWriter
@@ -64,6 +65,10 @@ class Actor:
         self.updates_at_start = control.updates
         self.torch = torch
         self.rng = np.random.default_rng(spec.seed)
+        # The evaluation actor measures the greedy policy: plain epsilon, never held actions.
+        self.explorer = Explorer(spec.epsilon, spec.num_envs, self.rng,
+                                 durations=cfg.exploration == "ez" and bool(spec.streams),
+                                 mu=cfg.ez_mu, max_duration=cfg.ez_max_duration)
         self.net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
         # Pulled float32 weights are converted on load (WeightBroadcast copies into the tensors).
         self.net.to(resolve_actor_precision(cfg.actor_precision, spec.num_envs)).eval()
@@ -98,6 +103,7 @@ class Actor:
         self.carrying[j] = float(info["carrying"])
         self.returns[j], self.lengths[j] = 0.0, 0
         self.histories[j] = -1
+        self.explorer.reset(j)
         if self.writers:
             self.writers[j].begin_episode(obs, bool(info["carrying"]))
 
@@ -147,9 +153,7 @@ class Actor:
     def step(self) -> int:
         """One step of every environment; returns the number of env steps taken."""
         q = self.q_values(self.stacks, self.histories, self.carrying)  # [E, A]
-        actions = q.argmax(axis=1)
-        explore = self.rng.random(len(actions)) < self.spec.epsilon
-        actions[explore] = self.rng.integers(0, q.shape[1], int(explore.sum()))
+        actions = self.explorer.act(q.argmax(axis=1))
         for j, env in enumerate(self.envs):
             self._step_env(j, env, int(actions[j]), q[j])
         self.steps += len(self.envs)
@@ -306,8 +310,10 @@ def actor_specs(cfg: Config) -> List[ActorSpec]:
     e = cfg.envs_per_actor
     specs = []
     for i in range(cfg.actors):
+        # Ape-X gives every environment instance its own rate: with several envs per actor the
+        # schedule runs over all of them, or 2 actors x 16 envs would have only two rates.
         eps = cfg.epsilon if cfg.epsilon_schedule == "fixed" else \
-            epsilon_for_actor(i, cfg.actors)
+            tuple(epsilon_for_actor(i * e + j, cfg.actors * e) for j in range(e))
         specs.append(ActorSpec(index=i, streams=tuple(range(i * e, (i + 1) * e)), epsilon=eps,
                                seed=cfg.seed * 7919 + i, env_kwargs=env_kwargs(cfg), num_envs=e))
     if cfg.eval_every:

@@ -1,0 +1,189 @@
+"""Exploration: the ez-greedy process, the delivery reach, and the exploration measurement."""
+
+import math
+
+import numpy as np
+import pytest
+
+from dqn_mine.agent.explore import HELD_ACTIONS, Explorer, zeta_durations
+from dqn_mine.bench.explore import POLICIES, SUBGOALS, measure
+from dqn_mine.env import MineRescueEnv
+from dqn_mine.env.mine import AGENT_RADIUS, FORWARD_STEP, HEADINGS
+
+INTERACT = 4
+
+
+# --- the exploration process -------------------------------------------------------------------
+
+def test_zeta_durations_follow_the_power_law():
+    rng = np.random.default_rng(0)
+    n = zeta_durations(rng, 200_000, mu=2.0, cap=5)
+    p = np.arange(1, 6) ** -2.0
+    p /= p.sum()
+    freq = np.bincount(n, minlength=6)[1:] / len(n)
+    assert n.min() == 1 and n.max() == 5
+    np.testing.assert_allclose(freq, p, atol=0.005)
+
+
+def test_epsilon_zero_is_greedy_and_one_is_uniform():
+    greedy = np.array([3, 1, 0, 5])
+    ex = Explorer(0.0, 4, np.random.default_rng(0), durations=True)
+    for _ in range(50):
+        assert (ex.act(greedy) == greedy).all()
+    ex = Explorer(1.0, 1000, np.random.default_rng(1))
+    counts = np.bincount(ex.act(np.zeros(1000, int)), minlength=6)
+    assert counts.min() > 120 and counts.max() < 215   # 1000 / 6 = 167 each
+
+
+def test_held_motion_lasts_its_duration_and_interaction_one_step():
+    rng = np.random.default_rng(2)
+    ex = Explorer(1.0, 5000, rng, durations=True, max_duration=100)
+    greedy = np.zeros(5000, int)
+    first = ex.act(greedy)
+    # after one step a run still has duration - 1 steps left; interaction and no-op have none
+    assert (ex.left[first >= HELD_ACTIONS] == 0).all()
+    assert (ex.left[first < HELD_ACTIONS] > 0).mean() > 0.3   # P(n >= 2) = 1 - 1/zeta ~ 0.4
+    held = first < HELD_ACTIONS
+    left = ex.left.copy()
+    for k in range(1, 6):
+        now = ex.act(greedy)
+        still = held & (left >= k)
+        assert (now[still] == first[still]).all(), "a run keeps its action until it is spent"
+
+
+def test_reset_cancels_a_running_action():
+    ex = Explorer([1.0, 0.0], 2, np.random.default_rng(3), durations=True)
+    ex.action[:] = 0
+    ex.left[:] = 50
+    ex.reset(1)
+    out = ex.act(np.array([2, 2]))
+    assert out[0] == 0 and out[1] == 2     # env 1: run cancelled, epsilon 0 -> greedy
+
+
+def test_without_durations_nothing_is_held():
+    ex = Explorer(1.0, 100, np.random.default_rng(4), durations=False)
+    ex.act(np.zeros(100, int))
+    assert (ex.left == 0).all()
+
+
+# --- delivery reach (hand-placed scenes) -------------------------------------------------------
+
+@pytest.fixture()
+def room():
+    env = MineRescueEnv(task="one-room")
+    env.reset(seed=5)
+    r = env.layout.rooms[0]
+    cx, cz = (r.x0 + r.x1) / 2, (r.z0 + r.z1) / 2
+    miner, kit = env.miner, env.kit
+    miner.x, miner.z = cx, cz
+    kit.x, kit.z = r.x0 + 1.5, r.z0 + 1.5
+    env.carrying = kit                     # hold the kit
+    env._entities_changed()
+    yield env, cx, cz
+    env.close()
+
+
+def _stand(env, x, z, heading):
+    env.agent_x, env.agent_z, env.heading = x, z, heading % HEADINGS
+
+
+def test_held_kit_near_the_miner_delivers(room):
+    env, cx, cz = room
+    # 2.2 units west of the miner, looking east: the held kit is 1.42 ahead, 0.78 from the
+    # miner, inside MiniWorld's near() distance (0.45 + 0.6 + 0.55 = 1.6) ...
+    _stand(env, cx - 2.2, cz, 0)
+    assert env.facing() is None, "... while the miner is beyond the pick-up reach"
+    _, reward, terminated, _, _ = env.step(INTERACT)
+    assert reward == 1.0 and terminated
+
+
+def test_kit_held_off_to_the_side_or_too_far_does_not_deliver(room):
+    env, cx, cz = room
+    _stand(env, cx - 3.2, cz, 0)                  # held kit 1.78 from the miner: too far
+    assert not env.delivers()
+    _stand(env, cx - 1.2, cz, HEADINGS // 2)      # looking away from the miner
+    assert not env.delivers()
+    _stand(env, cx - 1.2, cz, HEADINGS // 4)      # side-on: kit held 1.42 to the south
+    held = env.carry_position(env.kit)
+    assert math.dist(held, (cx, cz)) > 0.45 + 0.6 + 1.1 * FORWARD_STEP
+    assert not env.delivers()
+
+
+def test_carrying_something_else_never_delivers(room):
+    env, cx, cz = room
+    env.carrying = None
+    _stand(env, cx - AGENT_RADIUS - env.miner.radius - 0.2, cz, 0)
+    assert env.facing() is env.miner and not env.delivers()
+    _, reward, terminated, _, _ = env.step(INTERACT)
+    assert reward == 0.0 and not terminated
+
+
+def test_no_delivery_through_a_wall():
+    env = MineRescueEnv(task="two-room")
+    env.reset(seed=1)
+    door = env.layout.doors[0]
+    miner = env.miner
+    # put the agent right behind the wall opposite the miner, holding the kit, facing it
+    (dx, dz), a, b = door.center, env.layout.rooms[door.a], env.layout.rooms[door.b]
+    vertical = abs(a.x1 - b.x0) < 1e-6 or abs(b.x1 - a.x0) < 1e-6
+    env.carrying = env.kit
+    if vertical:
+        wall_x = a.x1 if abs(a.x1 - b.x0) < 1e-6 else a.x0
+        side = 1 if wall_x == a.x0 else -1     # the agent's room (door.a) side
+        miner.x, miner.z = wall_x - side * 0.7, dz + 4.0
+        env.agent_x, env.agent_z = wall_x + side * 0.8, dz + 4.0
+        env.heading = 0 if side < 0 else HEADINGS // 2
+    else:
+        wall_z = a.z1 if abs(a.z1 - b.z0) < 1e-6 else a.z0
+        side = 1 if wall_z == a.z0 else -1
+        miner.x, miner.z = dx + 4.0, wall_z - side * 0.7
+        env.agent_x, env.agent_z = dx + 4.0, wall_z + side * 0.8
+        env.heading = HEADINGS // 4 if side < 0 else 3 * HEADINGS // 4
+    env._entities_changed()
+    held = env.carry_position(env.kit)
+    assert math.dist(held, (miner.x, miner.z)) < 1.6   # near, but the wall is between
+    assert not env.delivers()
+    env.close()
+
+
+# --- the measurement ---------------------------------------------------------------------------
+
+def test_exploration_measurement_is_reproducible_and_consistent():
+    kwargs = dict(task="two-room", max_episode_steps=150)
+    a = measure(kwargs, POLICIES["ez-uniform"], episodes=8, num_envs=4, seed=3)
+    b = measure(kwargs, POLICIES["ez-uniform"], episodes=8, num_envs=4, seed=3)
+    assert a["episodes"] == 8
+    assert {k: a[k] for k in SUBGOALS} == {k: b[k] for k in SUBGOALS}
+    # the doorway is blocked: no room is entered without moving its boulder first
+    assert a["room entered"] <= a["boulder moved"]
+    assert a["delivered"] <= a["kit picked up"]
+
+
+def test_fresh_network_policy_runs():
+    r = measure(dict(task="one-room", max_episode_steps=100), POLICIES["fresh ez Ape-X"],
+                episodes=4, num_envs=4, seed=0)
+    assert r["episodes"] == 4 and all(0.0 <= r[k] <= 1.0 for k in SUBGOALS)
+    assert r["boulder moved"] == 0.0 and r["room entered"] == 0.0   # one room, no boulders
+
+
+# --- configuration -----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("argv, match", [
+    (["--exploration", "levy"], "exploration"),
+    (["--ez-mu", "1.0"], "ez-mu"),
+    (["--ez-max-duration", "0"], "ez-max-duration"),
+])
+def test_bad_exploration_flags_are_one_line_errors(argv, match):
+    from dqn_mine.config import ConfigError, parse_args
+
+    with pytest.raises(ConfigError, match=match) as err:
+        parse_args(argv)
+    assert "\n" not in str(err.value)
+
+
+def test_cpu_preset_is_the_full_two_room_task():
+    from dqn_mine.config import parse_args
+
+    cfg = parse_args(["--preset", "cpu"])
+    assert (cfg.task, cfg.room_size, cfg.max_episode_steps) == ("two-room", 16.0, None)
+    assert (cfg.exploration, cfg.epsilon_schedule, cfg.n_step) == ("ez", "apex", 6)
