@@ -138,7 +138,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="rooms of the `rooms` task, 2..12 (default 4)")
     ap.add_argument("--room-size", type=float, default=None, help="side of each room in units")
     ap.add_argument("--placement", default=None, help="fixed or any-room (domain randomisation)")
-    ap.add_argument("--phase", type=int, default=None, help="three-room curriculum phase 1..6")
+    ap.add_argument("--phase", type=int, default=None,
+                    help="curriculum phase: 1..6 of three-room, 1..4 of two-room")
     ap.add_argument("--visual-randomisation", action="store_true",
                     help="random light, wall colour and field of view")
     ap.add_argument("--seed", type=int, default=0, help="episode seed")

@@ -104,7 +104,7 @@ BAD = [
     (["--room-size", "0"], "--room-size"),
     (["--max-episode-steps", "0"], "--max-episode-steps"),
     (["--task", "rooms", "--num-rooms", "1"], "--num-rooms"),
-    (["--curriculum", "adaptive"], "three-room"),
+    (["--curriculum", "adaptive", "--task", "one-room"], "three-room"),
     (["--curriculum", "schedule", "--task", "rooms", "--rooms-schedule", "1", "3"],
      "--rooms-schedule"),
     (["--eval-task", "cave"], "--eval-task"),

@@ -82,6 +82,8 @@ def test_evaluation_actor_runs_the_full_target_task():
     adaptive = parse_args(["--task", "three-room", "--curriculum", "adaptive",
                            "--eval-every", "1000"])
     assert initial_phase(adaptive) == 6 and not actor_specs(adaptive)[-1].follows_curriculum
+    two = parse_args(["--curriculum", "adaptive", "--eval-every", "1000"])   # two-room
+    assert initial_phase(two) == 4 and eval_env_kwargs(two)["task"] == "two-room"
     rooms = parse_args(["--task", "rooms", "--curriculum", "schedule", "--rooms-schedule", "3", "4",
                         "5", "--eval-every", "1000"])
     assert eval_env_kwargs(rooms)["num_rooms"] == 5 and initial_phase(rooms) == 3

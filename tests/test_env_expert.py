@@ -9,7 +9,7 @@ import pytest
 
 from dqn_mine.env import MineRescueEnv
 from dqn_mine.env.entities import BOULDER
-from dqn_mine.env.tasks import PHASES
+from dqn_mine.env.tasks import PHASES, TASK_PHASES, TWO_ROOM_PHASES
 
 SOLVE_CONFIGS = [
     dict(task="one-room"),
@@ -71,31 +71,40 @@ def test_expert_solves_nearly_all_of_100_episodes(config):
     assert rate >= 0.97, f"expert solved only {rate:.0%}"
 
 
-@pytest.mark.parametrize("phase", sorted(PHASES))
-def test_phase_starts_as_specified(phase):
-    env = MineRescueEnv(task="three-room", phase=phase)
-    want = PHASES[phase]
+# (task, phase, kit room, miner room) for every curriculum phase
+PHASE_CASES = [("three-room", p, 2, 0) for p in sorted(PHASES)] + \
+    [("two-room", p, 1, 1) for p in sorted(TWO_ROOM_PHASES)]
+
+
+@pytest.mark.parametrize("task, phase, kit_room, miner_room", PHASE_CASES,
+                         ids=[f"{t}-{p}" for t, p, _, _ in PHASE_CASES])
+def test_phase_starts_as_specified(task, phase, kit_room, miner_room):
+    env = MineRescueEnv(task=task, phase=phase)
+    want = TASK_PHASES[task][phase]
     for seed in range(5):
         _, info = env.reset(seed=seed)
+        doors = len(env.layout.doors)
         assert info["agent_room"] == want.agent_room
-        assert info["miner_room"] == 0
+        assert info["miner_room"] == miner_room
         assert info["carrying_kit"] == want.carrying_kit == info["carrying"]
         if not want.carrying_kit:
-            assert info["kit_room"] == 2
+            assert info["kit_room"] == kit_room
         # Boulders moved aside leave their doorways open: the chain's first k doors are clear.
         assert open_doorways(env) == [True] * want.boulders_aside + \
-            [False] * (2 - want.boulders_aside)
+            [False] * (doors - want.boulders_aside)
     env.close()
 
 
-def test_harder_phases_need_more_expert_steps():
-    """Phase 6 (carrying the kit next to the miner) is easiest, phase 1 the full task."""
+@pytest.mark.parametrize("task", sorted(TASK_PHASES))
+def test_harder_phases_need_more_expert_steps(task):
+    """The easiest phase (carrying the kit next to the miner) is first, phase 1 the full task."""
     means = {}
-    for phase in sorted(PHASES):
-        env = MineRescueEnv(task="three-room", phase=phase)
+    phases = TASK_PHASES[task]
+    for phase in sorted(phases):
+        env = MineRescueEnv(task=task, phase=phase)
         means[phase] = statistics.mean(expert_episode(env, s)[1] for s in range(8))
         env.close()
-    order = [means[p] for p in sorted(PHASES, reverse=True)]   # 6, 5, ..., 1
+    order = [means[p] for p in sorted(phases, reverse=True)]   # easiest first
     assert order == sorted(order), means
 
 

@@ -11,7 +11,8 @@
 uniformly random room; the family still contains the fixed task. For ``rooms`` both placements
 are the same. Rooms are numbered in the order they were placed (the chain order for three-room).
 
-Curriculum phases of ``three-room`` (1 is the full task; the study trained 6 first):
+Curriculum phases of ``three-room`` (1 is the full task; the study trained 6 first); ``two-room``
+has phases 1-4 built the same way (see ``TWO_ROOM_PHASES``):
 
 | phase | start                                                              |
 |-------|--------------------------------------------------------------------|
@@ -54,6 +55,16 @@ PHASES = {
     5: Phase(1, 2, True),
     6: Phase(0, 2, True),
 }
+# The same reverse curriculum for two-room (kit and miner both in room 1): 4 is carrying the kit
+# in the miner's room, 3 the one-room problem in that room, 2 the full task with the doorway
+# already cleared, 1 the full task.
+TWO_ROOM_PHASES = {
+    1: Phase(0, 0, False),
+    2: Phase(0, 1, False),
+    3: Phase(1, 1, False),
+    4: Phase(1, 1, True),
+}
+TASK_PHASES = {"two-room": TWO_ROOM_PHASES, "three-room": PHASES}
 
 
 def _one_room(env: "MineRescueEnv") -> None:
@@ -65,22 +76,22 @@ def _one_room(env: "MineRescueEnv") -> None:
 
 def _two_room(env: "MineRescueEnv") -> None:
     env._build_layout(2, chain=False)
-    env._block_doorways()
-    agent, kit, miner = env._start_rooms(fixed=(0, 1, 1))
-    env._place(MINER, miner)
-    env._place(KIT, kit)
-    env._place_agent(agent)
+    _populate(env, env._block_doorways(), kit_room=1, miner_room=1)
 
 
 def _three_room(env: "MineRescueEnv") -> None:
     env._build_layout(3, chain=True)
-    boulders = env._block_doorways()
+    _populate(env, env._block_doorways(), kit_room=2, miner_room=0)
+
+
+def _populate(env: "MineRescueEnv", boulders, kit_room: int, miner_room: int) -> None:
+    """Place miner, kit and agent: the full task (agent in room 0), or a curriculum phase."""
     if env.phase is None or env.phase == 1:
-        agent, kit, miner = env._start_rooms(fixed=(0, 2, 0))
+        agent, kit, miner = env._start_rooms(fixed=(0, kit_room, miner_room))
         carrying = False
     else:
-        phase = PHASES[env.phase]
-        agent, kit, miner, carrying = phase.agent_room, 2, 0, phase.carrying_kit
+        phase = TASK_PHASES[env.task][env.phase]
+        agent, kit, miner, carrying = phase.agent_room, kit_room, miner_room, phase.carrying_kit
         for boulder, door in list(zip(boulders, env.layout.doors))[:phase.boulders_aside]:
             env._move_aside(boulder, door)
     env._place(MINER, miner)
@@ -200,10 +211,13 @@ def _check_rooms(spec: Task, num_rooms) -> int:
 def _check_phase(task: str, placement: str, phase) -> int | None:
     if phase is None:
         return None
-    if task != "three-room":
-        raise ValueError(f"curriculum phases exist only for task 'three-room', not {task!r}")
-    if not _is_int(phase) or phase not in PHASES:
-        raise ValueError(f"phase must be an integer in 1..{len(PHASES)} or None, got {phase!r}")
+    if task not in TASK_PHASES:
+        raise ValueError(f"curriculum phases exist only for tasks 'two-room' and 'three-room', "
+                         f"not {task!r}")
+    phases = TASK_PHASES[task]
+    if not _is_int(phase) or phase not in phases:
+        raise ValueError(f"phase must be an integer in 1..{len(phases)} or None for {task!r}, "
+                         f"got {phase!r}")
     if placement != "fixed":
         raise ValueError("curriculum phases need placement='fixed'")
     return int(phase)

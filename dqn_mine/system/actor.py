@@ -295,9 +295,12 @@ def attach_all(cfg: Config, handle: tuple):
 
 
 def initial_phase(cfg: Config) -> int:
-    """Start of the curriculum: the easiest phase (6), or the first room count."""
+    """Start of the curriculum: the easiest phase (6 of three-room, 4 of two-room), or the first
+    room count."""
     if cfg.curriculum == "adaptive":
-        return 6
+        from dqn_mine.env.tasks import TASK_PHASES
+
+        return max(TASK_PHASES[cfg.task])
     if cfg.curriculum == "schedule":
         return int(cfg.rooms_schedule[0])
     return 0
