@@ -188,3 +188,27 @@ def test_cpu_preset_is_the_full_two_room_task():
     assert (cfg.task, cfg.room_size, cfg.max_episode_steps) == ("two-room", 16.0, None)
     assert (cfg.exploration, cfg.epsilon_schedule, cfg.n_step) == ("ez", "apex", 6)
     assert cfg.curriculum == "adaptive" and cfg.eval_every > 0   # judged on the full task
+
+
+def test_a_kit_held_from_the_start_counts_as_picked_up_only_when_taken_again():
+    from dqn_mine.bench.explore import _Tracker
+
+    env = MineRescueEnv(task="two-room", phase=4)     # starts carrying the kit
+    for seed in range(10):
+        _, info = env.reset(seed=seed)
+        tracker = _Tracker(env, info)
+        _, _, _, _, info = env.step(5)                 # no-op: still the kit it started with
+        tracker.update(info)
+        assert info["carrying_kit"] and not tracker.flags["kit picked up"]
+        _, _, term, _, info = env.step(INTERACT)       # drop it in front (unless it delivers)
+        tracker.update(info)
+        if term or info["carrying"]:
+            continue                                   # delivered, or no room to drop: next seed
+        assert not tracker.flags["kit picked up"]
+        _, _, _, _, info = env.step(INTERACT)          # and take it up again
+        tracker.update(info)
+        assert info["carrying_kit"] and tracker.flags["kit picked up"]
+        break
+    else:
+        raise AssertionError("no seed let the agent drop the kit")
+    env.close()

@@ -12,8 +12,11 @@ from __future__ import annotations
 
 import numpy as np
 
-NUM_ACTIONS = 6
-HELD_ACTIONS = 4   # actions 0-3 (forward, backward, turns) are held; 4 and 5 last one step
+from dqn_mine.env.mine import ACTION_NAMES, INTERACT
+
+NUM_ACTIONS = len(ACTION_NAMES)
+# Actions below INTERACT (forward, backward, the turns) are held; interact and no-op last one step.
+HELD_ACTIONS = INTERACT
 
 
 def zeta_durations(rng: np.random.Generator, size: int, mu: float, cap: int) -> np.ndarray:

@@ -70,7 +70,7 @@ def _epsilons(policy: Policy, num_envs: int) -> np.ndarray:
 class _Tracker:
     """Sub-goal flags of the running episode of one environment."""
 
-    def __init__(self, env):
+    def __init__(self, env, info: dict):
         from dqn_mine.env.entities import BOULDER
 
         self.env = env
@@ -78,9 +78,11 @@ class _Tracker:
         self.boulders = [(e, e.x, e.z) for e in env.entities if e.kind == BOULDER]
         self.flags = dict.fromkeys(SUBGOALS, False)
         self.pose = (env.agent_x, env.agent_z, env.heading)
+        self.had_kit = info["carrying_kit"]   # a phase may start with the kit in hand
         self.idle = 0   # steps in which the agent neither moved nor turned
 
-    def update(self) -> None:
+    def update(self, info: dict) -> None:
+        """After a step; ``info`` is what the step returned."""
         env, flags = self.env, self.flags
         pose = (env.agent_x, env.agent_z, env.heading)
         self.idle += pose == self.pose
@@ -90,14 +92,27 @@ class _Tracker:
                                          for b, x, z in self.boulders)
         if not flags["room entered"] and env.agent_room != self.start_room:
             flags["room entered"] = True
-        if not flags["kit picked up"] and env._carrying_kit() and env.steps > 0:
+        if info["carrying_kit"] and not self.had_kit:   # taken up by this step
             flags["kit picked up"] = True
+        self.had_kit = info["carrying_kit"]
 
 
 def measure(env_kwargs: dict, policy: Policy, episodes: int, num_envs: int = 32,
             seed: int = 0, network_kwargs: Optional[dict] = None) -> Dict[str, float]:
     """Run ``episodes`` episodes (``num_envs`` at a time) and return each sub-goal's share, the
-    mean and median steps to the first reward, and env steps/s."""
+    mean steps to the first reward, the share of idle steps and env steps/s."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)   # one core, as an actor has
+    try:
+        return _measure(env_kwargs, policy, episodes, num_envs, seed, network_kwargs)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _measure(env_kwargs: dict, policy: Policy, episodes: int, num_envs: int, seed: int,
+             network_kwargs: Optional[dict]) -> Dict[str, float]:
     import torch
 
     from dqn_mine.agent.explore import Explorer
@@ -106,7 +121,6 @@ def measure(env_kwargs: dict, policy: Policy, episodes: int, num_envs: int = 32,
 
     rng = np.random.default_rng(seed)
     torch.manual_seed(seed)
-    torch.set_num_threads(1)   # one core, as an actor has
     net = DuelingQNetwork(**(network_kwargs or {})).eval() if policy.network else None
     h = net.history_len if net is not None else 0
     envs = [MineRescueEnv(**env_kwargs) for _ in range(num_envs)]
@@ -123,7 +137,7 @@ def measure(env_kwargs: dict, policy: Policy, episodes: int, num_envs: int = 32,
         started += 1
         hist[j], carrying[j] = -1, float(info["carrying"])
         explorer.reset(j)
-        trackers[j] = _Tracker(envs[j])
+        trackers[j] = _Tracker(envs[j], info)
 
     for j in range(num_envs):
         begin(j)
@@ -146,7 +160,7 @@ def measure(env_kwargs: dict, policy: Policy, episodes: int, num_envs: int = 32,
             obs[j], carrying[j] = o, float(info["carrying"])
             if h:
                 hist[j, :-1], hist[j, -1] = hist[j, 1:], actions[j]
-            trackers[j].update()
+            trackers[j].update(info)
             if not (term or trunc):
                 continue
             trackers[j].flags["delivered"] = bool(term)
