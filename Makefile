@@ -6,7 +6,7 @@ PY     := $(VENV)/bin/python
 TORCH  ?= torch==2.13.0
 PYTEST_ARGS ?=
 
-.PHONY: install test test-fast lint train bench clean
+.PHONY: install test test-fast lint train bench gpu-check clean
 
 install: $(VENV)/.installed
 
@@ -32,6 +32,13 @@ train: install
 bench: install
 	$(PY) -m pip install -q -e ".[bench]"
 	$(PY) -m dqn_mine.bench --out results/bench.md
+
+# The CUDA check (docs/gpu-check.md): one command on a GPU machine, about 8 minutes, figures in
+# results/gpu-check/. Uses the virtualenv when there is one, else python3 (a GPU image with torch).
+# Without CUDA it says so in one line and exits 0.
+GPU_PY ?= $(if $(wildcard $(PY)),$(PY),python3)
+gpu-check:
+	$(GPU_PY) -m dqn_mine.bench.gpu_check --out results/gpu-check
 
 clean:
 	rm -rf $(VENV) *.egg-info .pytest_cache

@@ -148,6 +148,30 @@ def test_replay_ratio_budget_counts_updates_since_the_actor_started():
         assert Actor.allowed_steps(actor) == 200 + 60 / 0.05 / 2 + slack
 
 
+@pytest.mark.parametrize("actors,ratio,overshoot", [(9, 0.111, 0), (9, 0.111, 5000),
+                                                    (1, 0.05, 300), (7, 0.023, 10_000)])
+def test_replay_ratio_never_deadlocks_when_every_actor_is_at_its_cap(actors, ratio, overshoot):
+    """Regression: the learner used to count new steps from those measured when pre-fill ended,
+    the actors from the nominal pre-fill. Fast actors that had overshot the pre-fill and reached
+    their caps by then left neither side a step to take. Whatever the overshoot, actors at their
+    caps must leave the learner an update, and the learner's updates must raise the caps."""
+    from dqn_mine.config import parse_args
+    from dqn_mine.system.actor import actor_step_budget, learner_may_update, prefill_target
+
+    cfg = parse_args(["--actors", str(actors), "--prefill", "2000", "--replay-ratio", str(ratio)])
+    prefill_end = prefill_target(cfg) + overshoot   # steps measured when the learner starts
+    updates = 0
+    for _ in range(200):
+        at_cap = actors * int(actor_step_budget(cfg, updates))
+        steps = max(prefill_end, at_cap)           # every actor as far as it may go
+        assert learner_may_update(cfg, updates, steps)
+        while learner_may_update(cfg, updates, steps):
+            updates += 1
+        assert actor_step_budget(cfg, updates) * actors > steps   # the actors may move again
+    # and the ratio holds: updates per step after the nominal pre-fill stay close to the target
+    assert updates / (steps - prefill_target(cfg)) == pytest.approx(ratio, rel=0.05)
+
+
 # -- parallel runs ---------------------------------------------------------------------------
 def test_parallel_run_with_two_actors(tmp_path):
     run_dir = tmp_path / "par"

@@ -1,7 +1,11 @@
 """Learner and actor-network throughput on synthetic data (no environment, no replay).
 
-- learner: :class:`DQNUpdater` updates/s (forward on s and s', target, backward, Adam) at batch 32
-  and 256, for each torch thread count up to the machine's cores, CPU and (when present) CUDA;
+- learner: :class:`DQNUpdater` updates/s (forward on s and s', target, backward, Adam) at batch
+  32, 64 and 256, with 1 and 2 torch threads, the plain float32 update (the reference) and the
+  bfloat16 path side by side: the variants take turns in short rounds and each figure is the
+  median over rounds, so a noisy neighbour on a shared machine slows both alike. Each row also
+  gives the compute rate the update reaches, against the core's limit measured the same way (a
+  2048 x 2048 matrix product in the same dtype and threads);
 - actor: batched ``inference_mode`` forward passes per second at batch 1, 4, 8, 16, 32 (one env
   step per row), with one torch thread (what actor processes use), float32 and bfloat16 weights.
 
@@ -11,11 +15,13 @@
 from __future__ import annotations
 
 import os
+import statistics
 import time
-from typing import Callable, List
+from typing import Callable, Dict, List
 
 import numpy as np
 import torch
+from torch import nn
 
 from dqn_mine.agent.learning import DQNUpdater, batch_to_device
 from dqn_mine.agent.network import DuelingQNetwork
@@ -46,12 +52,101 @@ def rate(step: Callable[[], None], seconds: float, warmup: int = 3, sync=lambda:
     return n / (time.perf_counter() - start)
 
 
+def side_by_side(steps: Dict[str, Callable[[], None]], seconds: float, rounds: int,
+                 sync=lambda: None) -> Dict[str, float]:
+    """Median calls/s of each step, timed in turns (``rounds`` rounds of ``seconds`` each)."""
+    for step in steps.values():
+        rate(step, 0.05, warmup=3, sync=sync)
+    samples: Dict[str, List[float]] = {name: [] for name in steps}
+    for _ in range(rounds):
+        for name, step in steps.items():
+            samples[name].append(rate(step, seconds, warmup=1, sync=sync))
+    return {name: statistics.median(v) for name, v in samples.items()}
+
+
+# -- compute accounting ------------------------------------------------------------------------
+
+def forward_flops(net: nn.Module) -> Dict[str, float]:
+    """Multiply-adds x 2 of one frame's forward pass, per layer kind (convs, linears)."""
+    flops = {"conv": 0.0, "linear": 0.0}
+
+    def count(module, inputs, output):
+        if isinstance(module, nn.Conv2d):
+            k = module.in_channels // module.groups * module.kernel_size[0] * \
+                module.kernel_size[1]
+            flops["conv"] += 2.0 * k * output[0].numel()
+        elif isinstance(module, nn.Linear):
+            flops["linear"] += 2.0 * module.in_features * module.out_features
+
+    hooks = [m.register_forward_hook(count) for m in net.modules()
+             if isinstance(m, (nn.Conv2d, nn.Linear))]
+    try:
+        with torch.no_grad():
+            net(torch.zeros(1, *net.obs_shape, dtype=torch.uint8),
+                torch.zeros(1, net.history_len, dtype=torch.int8), torch.zeros(1))
+    finally:
+        for h in hooks:
+            h.remove()
+    return flops
+
+
+def update_flops(net: DuelingQNetwork, batch_size: int) -> float:
+    """FLOPs of one update: three forward passes (online on s and s', target on s'), and a
+    backward pass of the one on s: weight gradients (as much as its forward) and input gradients
+    (as much again, except for the first layer, whose input needs none)."""
+    per_frame = forward_flops(net)
+    forward = per_frame["conv"] + per_frame["linear"]
+    first = _first_layer_flops(net)
+    return batch_size * (3 * forward + forward + (forward - first))
+
+
+def _first_layer_flops(net: DuelingQNetwork) -> float:
+    with torch.no_grad():
+        out = net.conv[0](torch.zeros(1, *net.obs_shape))
+    w = net.conv[0].weight
+    return 2.0 * w[0].numel() * out.numel()
+
+
+def gemm_limit(dtype: torch.dtype, n: int = 2048, seconds: float = 1.0) -> float:
+    """FLOP/s of a large matrix product in ``dtype`` with the current torch threads."""
+    a = torch.rand(n, n).to(dtype)
+    b = torch.rand(n, n).to(dtype)
+    return rate(lambda: a @ b, seconds, warmup=2) * 2.0 * n ** 3
+
+
+def _updater(precision: str, device: str) -> DQNUpdater:
+    torch.manual_seed(0)
+    return DQNUpdater(DuelingQNetwork(), lr=3e-5, device=device, max_grad_norm=40.0,
+                      precision=precision)
+
+
+def _update_step(updater: DQNUpdater, host: Batch, device: str) -> Callable[[], None]:
+    # Each update copies a host batch to the device (as the learner does), then reads td_abs back.
+    return lambda: updater.update(batch_to_device(host, device))
+
+
+def learner_rates(precisions: List[str], batch_size: int, device: str, seconds: float,
+                  rounds: int) -> Dict[str, float]:
+    """Updates/s of each precision's update at ``batch_size``, timed side by side."""
+    host = synthetic_batch(batch_size)
+    steps = {p: _update_step(_updater(p, device), host, device) for p in precisions}
+    sync = torch.cuda.synchronize if device == "cuda" else (lambda: None)
+    return side_by_side(steps, seconds, rounds, sync)
+
+
+def learner_rate(batch_size: int, device: str, seconds: float, warmup: int = 3,
+                 precision: str = "float32") -> float:
+    host = synthetic_batch(batch_size)
+    sync = torch.cuda.synchronize if device == "cuda" else (lambda: None)
+    return rate(_update_step(_updater(precision, device), host, device), seconds, warmup, sync)
+
+
 def _spin(stop) -> None:
     while not stop.is_set():
         sum(range(10_000))
 
 
-def contended_learner_rate(threads: int, seconds: float) -> float:
+def contended_learner_rate(threads: int, seconds: float, precision: str = "float32") -> float:
     """Batch-32 updates/s while one other process keeps a core busy (as an actor does)."""
     import multiprocessing as mp
 
@@ -62,7 +157,7 @@ def contended_learner_rate(threads: int, seconds: float) -> float:
     try:
         time.sleep(0.3)
         torch.set_num_threads(threads)
-        return learner_rate(32, "cpu", seconds, warmup=1)
+        return learner_rate(32, "cpu", seconds, warmup=1, precision=precision)
     finally:
         stop.set()
         proc.join(5)
@@ -70,13 +165,71 @@ def contended_learner_rate(threads: int, seconds: float) -> float:
             proc.kill()
 
 
-def learner_rate(batch_size: int, device: str, seconds: float, warmup: int = 3) -> float:
-    torch.manual_seed(0)
-    updater = DQNUpdater(DuelingQNetwork(), lr=3e-5, device=device, max_grad_norm=40.0)
-    host = synthetic_batch(batch_size)
-    sync = torch.cuda.synchronize if device == "cuda" else (lambda: None)
-    # Each update copies a host batch to the device (as the learner does), then reads td_abs back.
-    return rate(lambda: updater.update(batch_to_device(host, device)), seconds, warmup, sync)
+def cpu_precisions() -> List[str]:
+    """The reference, plus bfloat16 where this CPU computes it natively."""
+    return ["float32", "bfloat16"] if native_bf16() else ["float32"]
+
+
+def learner_section(quick: bool) -> List[str]:
+    seconds, rounds = (0.3, 3) if quick else (0.6, 7)
+    cores = os.cpu_count() or 1
+    precisions = cpu_precisions()
+    net = DuelingQNetwork()
+    lines = [
+        "## Learner (synthetic batches)\n",
+        f"torch {torch.__version__}; an update = double-DQN target, IS-weighted Huber, backward, "
+        "Adam with grad-norm clip 40, host->device batch copy, td_abs back to the host. float32 "
+        "is the plain update (the reference); bfloat16 computes convolutions and the first head "
+        "layers in bfloat16 with float32 master weights, outputs, loss and Adam "
+        "(`--learner-precision`). Variants timed in turns, median of "
+        f"{rounds} rounds. An update is {update_flops(net, 1) / 1e6:.1f} MFLOP per sample "
+        "(3 forward passes + backward); 'limit' = a 2048^2 matrix product in the same dtype "
+        "and threads.\n",
+        "| device | torch threads | batch | precision | updates/s | ms/update | vs float32 | "
+        "GFLOP/s | limit GFLOP/s | limit / reached |",
+        "|---|---|---|---|---|---|---|---|---|---|"]
+    for threads in sorted({1, min(2, cores)}):
+        torch.set_num_threads(threads)
+        limits = {p: gemm_limit(getattr(torch, p)) for p in precisions}
+        for b in (32, 64, 256):
+            rates = learner_rates(precisions, b, "cpu", seconds, rounds)
+            for p in precisions:
+                lines.append(_row("cpu", threads, b, p, rates, net, limits[p]))
+    if cores > 1:
+        for threads in sorted({1, cores}):
+            for p in precisions:
+                r = contended_learner_rate(threads, seconds * 3, p)
+                lines.append(f"| cpu, 1 core busy | {threads} | 32 | {p} | {r:.1f} | "
+                             f"{1000 / r:.1f} | | | | |")
+    if torch.cuda.is_available():
+        lines += cuda_rows(net, seconds, rounds)
+    lines += ["", "Alone, 2 threads nearly double batch-32 updates; next to one busy process "
+              "(an actor) 2 threads can collapse to a few updates/s, far below 1 thread (the "
+              "'1 core busy' rows: OpenMP threads wait on each other across a contended "
+              "core). Learner: threads = cores the acting processes leave free, at least 1 "
+              "(Config.learner_threads 0 = auto); actors: 1 thread.\n"]
+    return lines
+
+
+def cuda_rows(net: DuelingQNetwork, seconds: float, rounds: int) -> List[str]:
+    name = torch.cuda.get_device_name()
+    precisions = ["float32"] + (["bfloat16"] if torch.cuda.is_bf16_supported() else [])
+    lines = []
+    for b in (32, 256, 512):
+        rates = learner_rates(precisions, b, "cuda", seconds, rounds)
+        for p in precisions:
+            lines.append(_row(f"cuda ({name})", "-", b, p, rates, net, float("nan")))
+    return lines
+
+
+def _row(device, threads, b: int, precision: str, rates: Dict[str, float],
+         net: DuelingQNetwork, limit: float) -> str:
+    r = rates[precision]
+    reached = r * update_flops(net, b)
+    ratio = limit / reached if limit == limit else float("nan")
+    return (f"| {device} | {threads} | {b} | {precision} | {r:.1f} | {1000 / r:.2f} | "
+            f"{r / rates['float32']:.2f}x | {reached / 1e9:.0f} | {limit / 1e9:.0f} | "
+            f"{ratio:.1f}x |")
 
 
 def inference_rate(batch: int, seconds: float, dtype=torch.float32) -> float:
@@ -95,37 +248,8 @@ def inference_rate(batch: int, seconds: float, dtype=torch.float32) -> float:
 def run(quick: bool = False) -> str:
     seconds = 1.5 if quick else 5.0
     saved_threads = torch.get_num_threads()
-    cores = os.cpu_count() or 1
-    thread_counts = sorted({1, min(2, cores), min(4, cores)} if quick else {1, 2, 4, cores})
-    thread_counts = [t for t in thread_counts if t <= cores]
-    lines: List[str] = [
-        "## Learner (synthetic batches)\n",
-        f"torch {torch.__version__}; an update = double-DQN target, IS-weighted Huber, backward, "
-        "Adam with grad-norm clip 40, host->device batch copy, td_abs back to the host.\n",
-        "| device | torch threads | batch | updates/s | ms/update | transitions/s |",
-        "|---|---|---|---|---|---|"]
     try:
-        for threads in thread_counts:
-            torch.set_num_threads(threads)
-            for b in (32, 256):
-                r = learner_rate(b, "cpu", seconds)
-                lines.append(f"| cpu | {threads} | {b} | {r:.1f} | {1000 / r:.1f} | {r * b:.0f} |")
-        if cores > 1:
-            for threads in sorted({1, cores}):
-                r = contended_learner_rate(threads, seconds)
-                lines.append(f"| cpu, 1 core busy | {threads} | 32 | {r:.1f} | {1000 / r:.1f} | "
-                             f"{r * 32:.0f} |")
-        if torch.cuda.is_available():
-            name = torch.cuda.get_device_name()
-            for b in (32, 256):
-                r = learner_rate(b, "cuda", seconds)
-                lines.append(f"| cuda ({name}) | - | {b} | {r:.1f} | {1000 / r:.2f} | "
-                             f"{r * b:.0f} |")
-        lines += ["", "Alone, 2 threads nearly double batch-32 updates; next to one busy process "
-                  "(an actor) 2 threads can collapse to a few updates/s, far below 1 thread (the "
-                  "'1 core busy' rows: OpenMP threads wait on each other across a contended "
-                  "core). Learner: threads = cores the acting processes leave free, at least 1 "
-                  "(Config.learner_threads 0 = auto); actors: 1 thread.\n"]
+        lines = learner_section(quick)
         torch.set_num_threads(1)
         lines += ["## Actor network (batched inference, 1 torch thread)\n",
                   f"bfloat16 weights (--actor-precision): this CPU computes bfloat16 "

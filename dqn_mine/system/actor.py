@@ -185,13 +185,7 @@ class Actor:
     # -- loop --------------------------------------------------------------------------------
     def allowed_steps(self) -> float:
         """Step budget under a fixed replay ratio (inf when free-running)."""
-        cfg = self.cfg
-        if not cfg.replay_ratio:
-            return float("inf")
-        share = (self.control.updates - self.updates_at_start) / cfg.replay_ratio \
-            / max(1, cfg.actors)
-        slack = 2 * cfg.batch_size / cfg.replay_ratio / max(1, cfg.actors) + 64
-        return cfg.prefill + share + slack
+        return actor_step_budget(self.cfg, self.control.updates - self.updates_at_start)
 
     def should_stop(self) -> bool:
         """The runner asked to stop, or it is gone (checked about once a second)."""
@@ -340,6 +334,30 @@ def eval_env_kwargs(cfg: Config) -> dict:
 def prefill_target(cfg: Config) -> int:
     """Env steps all actors together must publish before the learner starts."""
     return cfg.prefill * cfg.actors
+
+
+# Under --replay-ratio both sides count from the same point, the nominal pre-fill
+# (prefill_target): the learner may make ratio * (steps - prefill_target) updates, and each actor
+# may step prefill + its share of updates / ratio, plus slack. Counting the learner from the steps
+# measured when pre-fill ended instead (which overshoot the nominal pre-fill) deadlocks once every
+# actor has reached its cap by then: no new steps, so no updates, so no new budget.
+
+def actor_step_budget(cfg: Config, updates: int) -> float:
+    """Env steps one actor may have taken after ``updates`` updates of this run (inf: no limit)."""
+    if not cfg.replay_ratio:
+        return float("inf")
+    actors = max(1, cfg.actors)
+    share = updates / cfg.replay_ratio / actors
+    slack = 2 * cfg.batch_size / cfg.replay_ratio / actors + 64
+    return cfg.prefill + share + slack
+
+
+def learner_may_update(cfg: Config, updates: int, actor_steps: int) -> bool:
+    """Whether the learner, after ``updates`` updates of this run, may make another one while the
+    actors have taken ``actor_steps`` env steps in all (always, when free-running)."""
+    if not cfg.replay_ratio:
+        return True
+    return updates < cfg.replay_ratio * (actor_steps - prefill_target(cfg))
 
 
 def first_error(conn) -> Optional[tuple]:

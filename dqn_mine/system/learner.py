@@ -14,7 +14,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from dqn_mine.config import Config
+from dqn_mine.config import Config, resolve_learner_precision
 
 
 class BatchSource:
@@ -89,7 +89,9 @@ class Learner:
         self.cfg, self.control, self.weights, self.device = cfg, control, weights, device
         net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
         self.updater = DQNUpdater(net, lr=cfg.lr, target_update_interval=cfg.target_update_interval,
-                                  device=device, max_grad_norm=cfg.max_grad_norm)
+                                  device=device, max_grad_norm=cfg.max_grad_norm,
+                                  precision=resolve_learner_precision(cfg.learner_precision,
+                                                                      device))
         self.replay = PrioritizedReplay(storage, zeta=cfg.zeta if cfg.per else 0.0, eta=cfg.eta,
                                         seed=cfg.seed, init_priority=cfg.init_priority)
         self.updates = 0

@@ -22,7 +22,7 @@ from dqn_mine.config import Config, learner_threads, resolve_device
 from dqn_mine.metrics import MetricsTable, RateMeter, Rolling, progress_postfix
 from dqn_mine.system import checkpoint as ckpt
 from dqn_mine.system.actor import (Actor, actor_main, actor_specs, first_error, initial_phase,
-                                   prefill_target)
+                                   learner_may_update, prefill_target)
 from dqn_mine.system.control import Control
 from dqn_mine.system.layout import replay_layout, run_block_specs
 from dqn_mine.system.learner import Learner
@@ -284,11 +284,8 @@ class Run:
 
     def learner_may_update(self) -> bool:
         """Under a fixed replay ratio the learner waits for enough new transitions."""
-        ratio = self.cfg.replay_ratio
-        if not ratio:
-            return True
-        new_steps = self.control.total_actor_steps() - self.train_start_steps
-        return self.learner.updates - self.first_update < ratio * new_steps
+        return learner_may_update(self.cfg, self.learner.updates - self.first_update,
+                                  self.control.total_actor_steps())
 
     def train(self) -> None:
         cfg, learner = self.cfg, self.learner
