@@ -5,7 +5,7 @@ dataclass defaults < ``--preset NAME`` < flags given explicitly. With ``--resume
 is that run's saved ``config.json`` instead (explicit flags still win, e.g. ``--updates`` to
 train longer). Every impossible setting raises :class:`ConfigError` with a one-line message.
 
-The defaults are the study's (SPEC section 6) on ``two-room``.
+The defaults are the study's configuration on ``two-room``.
 """
 
 from __future__ import annotations
@@ -192,7 +192,7 @@ class Config:
 
 # Named starting points; explicit flags override them.
 PRESETS: Dict[str, Dict[str, Any]] = {
-    "paper": {},  # the study's configuration (SPEC section 6) on two-room
+    "paper": {},  # the study's configuration on two-room
     # Learns a small one-room on 2 CPU cores in minutes: high exploration from the Ape-X schedule
     # (actor 0 at 0.4; a random network alone barely moves), a faster learning rate and target
     # sync for the few updates there is time for, a small replay that fills quickly.

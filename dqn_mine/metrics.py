@@ -9,7 +9,7 @@ from collections import deque
 from pathlib import Path
 from typing import Dict, Iterable, Optional
 
-# SPEC section 8; one row every `log_interval` updates (and at the end).
+# What every run records; one row every `log_interval` updates (and at the end).
 COLUMNS = (
     "update", "wall_time", "env_steps", "episodes", "episode_return", "episode_length",
     "eval_return", "eval_length", "updates_per_s", "env_steps_per_s", "replay_ratio",

@@ -2,7 +2,7 @@
 
 A grid file (``experiments/grids/<name>.py``) is data: module-level constants, no logic.
 
-``TITLE``      one line naming the experiment (SPEC section 7).
+``TITLE``      one line naming the experiment.
 ``CONFIGS``    ``{name: {Config field: value}}``, the configurations compared, in plot order.
 ``BASE``       overrides every configuration shares (optional).
 ``SCALES``     ``{"paper" | "quick" | "smoke": {...}}`` with keys (all optional):

@@ -15,4 +15,4 @@ SMOKE = {"preset": "smoke", "updates": 150, "prefill": 200, "replay_capacity": 4
          "checkpoint_interval": 1000}
 SMOKE_NOTE = "a pipeline check only (150 updates on a tiny mine): no learning is expected"
 
-PAPER_NOTE = "the study's configuration (SPEC section 6)"
+PAPER_NOTE = "the study's configuration"

@@ -1,4 +1,4 @@
-"""The dueling network of SPEC section 4: shapes, input encoding, dueling combination."""
+"""The dueling network: shapes, input encoding, dueling combination."""
 
 import pytest
 import torch

@@ -1,4 +1,4 @@
-"""The configuration: defaults of SPEC section 6, CLI built from the dataclass, presets, validation,
+"""The configuration: the study's defaults, CLI built from the dataclass, presets, validation,
 json round trip."""
 
 import dataclasses

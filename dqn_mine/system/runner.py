@@ -333,7 +333,7 @@ class Run:
         return row
 
     def replay_ratio(self) -> float:
-        """Updates per transition generated since the learner started (SPEC section 5)."""
+        """Updates per transition generated since the learner started."""
         new = self.control.total_actor_steps() - self.train_start_steps
         return (self.learner.updates - self.first_update) / new if new > 0 else math.nan
 

@@ -1,1 +1,1 @@
-"""One grid file per experiment of the study (SPEC section 7); see :mod:`experiments.grid`."""
+"""One grid file per experiment of the study; see :mod:`experiments.grid`."""

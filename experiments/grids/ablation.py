@@ -1,4 +1,4 @@
-"""Ablation (SPEC 7.2, ``make ablation``): remove n-step, distribution or PER from the system."""
+"""Ablation (``make ablation``): remove n-step, distribution or PER from the system."""
 
 from experiments.scales import PAPER_NOTE, QUICK, QUICK_NOTE, SMOKE, SMOKE_NOTE
 

@@ -1,4 +1,4 @@
-"""Actors and replay ratio (SPEC 7.3): 1..9 actors free-running; 1 vs many at a fixed ratio."""
+"""Actors and replay ratio: 1..9 actors free-running; 1 vs many at a fixed ratio."""
 
 from experiments.scales import PAPER_NOTE, QUICK, QUICK_NOTE, SMOKE, SMOKE_NOTE
 

@@ -1,4 +1,4 @@
-"""Exploration (SPEC 7.6): plain epsilon-greedy vs adaptive curriculum vs any-room placement on
+"""Exploration: plain epsilon-greedy vs adaptive curriculum vs any-room placement on
 three-room, compared through the evaluation actor on the full task."""
 
 from experiments.scales import PAPER_NOTE, QUICK, SMOKE, SMOKE_NOTE

@@ -1,4 +1,4 @@
-"""n-step returns (SPEC 7.5): n from 1 to 7."""
+"""n-step returns: n from 1 to 7."""
 
 from experiments.scales import PAPER_NOTE, QUICK, QUICK_NOTE, SMOKE, SMOKE_NOTE
 

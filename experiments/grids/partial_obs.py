@@ -1,4 +1,4 @@
-"""Partial observability (SPEC 7.1): frame stacking vs action history on one-room."""
+"""Partial observability: frame stacking vs action history on one-room."""
 
 from experiments.scales import PAPER_NOTE, QUICK, QUICK_NOTE, SMOKE, SMOKE_NOTE
 

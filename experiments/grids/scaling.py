@@ -1,4 +1,4 @@
-"""Scaling (SPEC 7.7): 3, 4 and 5 rooms with any-room placement; a 3 -> 4 -> 5 schedule."""
+"""Scaling: 3, 4 and 5 rooms with any-room placement; a 3 -> 4 -> 5 schedule."""
 
 from experiments.scales import PAPER_NOTE, QUICK, SMOKE, SMOKE_NOTE
 

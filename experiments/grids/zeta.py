@@ -1,4 +1,4 @@
-"""Prioritised replay (SPEC 7.4): the priority exponent zeta from 0 (uniform) to 1."""
+"""Prioritised replay: the priority exponent zeta from 0 (uniform) to 1."""
 
 from experiments.scales import PAPER_NOTE, QUICK, QUICK_NOTE, SMOKE, SMOKE_NOTE
 
