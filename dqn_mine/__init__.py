@@ -5,3 +5,12 @@ __version__ = "0.1.0"
 from dqn_mine.env import register_envs as _register_envs
 
 _register_envs()
+
+
+def load_agent(path, epsilon: float = 0.0, seed: int = 0):
+    """A trained agent from a run folder or ``checkpoint.pt``: ``agent.predict(obs, info)`` gives
+    an action, ``agent.reset()`` starts an episode. A missing or corrupt checkpoint raises
+    ``CheckpointError`` (a ValueError) with a one-line message."""
+    from dqn_mine.agent.policy import AgentPolicy
+
+    return AgentPolicy.from_checkpoint(path, epsilon=epsilon, seed=seed)

@@ -240,7 +240,7 @@ def _problems(c: Config) -> List[str]:
     if c.preset not in PRESETS:
         p.append(f"--preset: unknown preset {c.preset!r} (choose from {', '.join(PRESETS)})")
     at_least = {"actors": 1, "envs_per_actor": 1, "n_step": 1, "batch_size": 1, "frame_stack": 1,
-                "history_len": 0, "prefill": 0, "updates": 0, "target_update_interval": 1,
+                "history_len": 0, "prefill": 0, "updates": 1, "target_update_interval": 1,
                 "publish_interval": 1, "learner_queue": 1, "learner_threads": 0, "eval_every": 0,
                 "eval_video_every": 0, "ez_max_duration": 1,
                 "eval_episodes": 1, "checkpoint_interval": 1, "log_interval": 1,
@@ -363,13 +363,22 @@ def _show(value) -> str:
     return str(value)
 
 
+# ``--help`` sections: the first Config field of each (fields are declared section by section).
+HELP_SECTIONS = {"task": "task", "actors": "actors", "updates": "learner",
+                 "history_len": "network", "replay_capacity": "replay",
+                 "eval_every": "evaluation", "seed": "run"}
+
+
 def build_parser() -> argparse.ArgumentParser:
     """``--flag`` per Config field; defaults are not filled in, so only explicit flags appear."""
     parser = _Parser(prog="python -m dqn_mine.train",
                      description="Train an Ape-X style DQN agent on the mine rescue task.",
                      argument_default=argparse.SUPPRESS)
     hints = _hints()
+    group = parser
     for f in dataclasses.fields(Config):
+        if f.name in HELP_SECTIONS:
+            group = parser.add_argument_group(HELP_SECTIONS[f.name])
         hint, meta = hints[f.name], f.metadata
         helptext = f"{meta['help']} (default: {_show(f.default)})"
         kwargs: Dict[str, Any] = {"help": helptext, "dest": f.name}
@@ -385,7 +394,7 @@ def build_parser() -> argparse.ArgumentParser:
             kwargs["metavar"] = "{" + ",".join(meta["choices"]) + "}"
         if f.name == "preset":
             kwargs["metavar"] = "{" + ",".join(PRESETS) + "}"
-        parser.add_argument(f"--{_flag(f.name)}", **kwargs)
+        group.add_argument(f"--{_flag(f.name)}", **kwargs)
     return parser
 
 

@@ -44,7 +44,7 @@ POLICIES: dict[str, Callable[[argparse.Namespace], Policy]] = {
 }
 
 # Environment settings play takes from a checkpoint's config unless given on the command line.
-ENV_DEFAULTS = {"task": "rooms", "room_size": 16.0, "placement": "fixed", "num_rooms": None,
+ENV_DEFAULTS = {"task": "two-room", "room_size": 16.0, "placement": "fixed", "num_rooms": None,
                 "max_steps": None}
 CONFIG_KEYS = {"task": "task", "room_size": "room_size", "placement": "placement",
                "num_rooms": "num_rooms", "max_steps": "max_episode_steps"}
@@ -133,7 +133,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="trained agent: a run folder or checkpoint.pt (its task is the default)")
     ap.add_argument("--epsilon", type=float, default=0.0, help="agent's exploration rate")
     ap.add_argument("--task", default=None, help="one-room, two-room, three-room or rooms "
-                    "(default: the checkpoint's, else rooms)")
+                    "(default: the checkpoint's, else two-room, as for train)")
     ap.add_argument("--num-rooms", type=int, default=None,
                     help="rooms of the `rooms` task, 2..12 (default 4)")
     ap.add_argument("--room-size", type=float, default=None, help="side of each room in units")

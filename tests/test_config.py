@@ -63,6 +63,7 @@ def test_preset_precedence_defaults_preset_flags():
 
 
 BAD = [
+    (["--updates", "0"], "--updates must be at least 1"),
     (["--actors", "0"], "--actors"),
     (["--envs-per-actor", "0"], "--envs-per-actor"),
     (["--n-step", "0"], "--n-step"),
@@ -220,3 +221,19 @@ def test_learner_threads():
     assert learner_threads(Config(actors=7), cores=16) == 9
     assert learner_threads(Config(actors=7, eval_every=10_000), cores=16) == 8
     assert learner_threads(Config(actors=2, learner_threads=3), cores=2) == 3
+
+
+def test_help_is_grouped_by_section():
+    from dqn_mine.config import build_parser
+
+    text = build_parser().format_help()
+    heads = ["task:", "actors:", "learner:", "network:", "replay:", "evaluation:", "run:"]
+    lines = text.splitlines()
+    at = [lines.index(h) for h in heads]
+    assert at == sorted(at)                                   # in this order
+    section_of = lambda flag: max(h for h in at if h < next(  # noqa: E731
+        i for i, line in enumerate(lines) if line.strip().startswith(flag)))
+    assert lines[section_of("--lr")] == "learner:"
+    assert lines[section_of("--zeta")] == "replay:"
+    assert lines[section_of("--epsilon ")] == "actors:"
+    assert lines[section_of("--resume")] == "run:"

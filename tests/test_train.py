@@ -203,6 +203,10 @@ def test_sigint_stops_cleanly_and_resume_continues(tmp_path):
     assert "--resume" in out
     wait_for(lambda: not alive(kids), 10, "every child process to exit")
     stopped_at = int(metrics_rows(run_dir)[-1]["update"])
+    from dqn_mine.system import checkpoint as ckpt
+
+    # the last metrics row is the stop itself, not the last log interval before it
+    assert int(ckpt.load(run_dir)["counters"]["updates"]) == stopped_at
     res = run_train("--resume", str(run_dir), "--updates", str(stopped_at + 40))
     assert res.returncode == 0, res.stderr[-3000:]
     updates = [int(r["update"]) for r in metrics_rows(run_dir)]

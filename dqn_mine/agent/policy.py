@@ -1,4 +1,5 @@
-"""A trained agent acting in one environment (for `python -m dqn_mine.play --checkpoint`).
+"""A trained agent acting in one environment: ``dqn_mine.load_agent(path)``, used by
+`python -m dqn_mine.play --checkpoint` and `python -m dqn_mine.evaluate`.
 
 It feeds the network exactly what the actors fed it during training: the last ``frame_stack``
 frames (zeros before the episode start), the last ``history_len`` actions (oldest first, -1 =
@@ -16,7 +17,11 @@ from dqn_mine.agent.network import DuelingQNetwork
 
 
 class AgentPolicy:
-    """``policy(env, obs, info) -> action``; call :meth:`reset` at each episode start."""
+    """``agent.predict(obs, info) -> action``; call :meth:`reset` at each episode start.
+
+    ``info`` is the step's info dict (the carrying flag is read from it; None = carrying
+    nothing). Also callable as ``agent(env, obs, info)``, the form ``play`` takes policies in.
+    """
 
     def __init__(self, net: DuelingQNetwork, frame_stack: int, history_len: int,
                  epsilon: float = 0.0, seed: int = 0):
@@ -47,6 +52,11 @@ class AgentPolicy:
         self.history[:] = -1
 
     def __call__(self, env, obs: np.ndarray, info: dict) -> int:
+        return self.predict(obs, info)
+
+    def predict(self, obs: np.ndarray, info: Optional[dict] = None) -> int:
+        """The action for ``obs`` (uint8 [3, H, W]); greedy unless ``epsilon`` > 0."""
+        carrying = float(bool((info or {}).get("carrying", False)))
         if self.stack is None:
             self.stack = np.zeros((self.frame_stack * obs.shape[0], *obs.shape[1:]), np.uint8)
         c = obs.shape[0]
@@ -54,7 +64,7 @@ class AgentPolicy:
         self.stack[-c:] = obs
         with torch.inference_mode():
             q = self.net(torch.from_numpy(self.stack[None]), torch.from_numpy(self.history[None]),
-                         torch.tensor([float(info["carrying"])]))[0]   # [A]
+                         torch.tensor([carrying]))[0]   # [A]
         action = int(q.argmax())
         if self.rng.random() < self.epsilon:
             action = int(self.rng.integers(q.numel()))

@@ -314,6 +314,8 @@ class Run:
                 agg = {k: [] for k in agg}
             if learner.updates % cfg.checkpoint_interval == 0:
                 self.save_checkpoint()
+        if agg["loss"]:  # stopped between log rows (Ctrl-C): the updates since get a row too
+            self.log_row(agg, upd_rate, step_rate)
         bar.close()
 
     def log_row(self, agg: dict, upd_rate: RateMeter, step_rate: RateMeter) -> dict:

@@ -1,0 +1,118 @@
+"""`python -m dqn_mine.evaluate RUN_DIR_OR_CHECKPOINT --episodes N`: a trained agent's score.
+
+Plays N episodes (seeds S, S+1, ...) greedily, or with ``--epsilon``, on the task the checkpoint
+was trained on unless ``--task`` and the other environment flags say otherwise; prints the mean
+and spread of the return, the success rate and the mean length, and writes ``eval.json`` next to
+the checkpoint (``--out`` elsewhere). ``--video PATH`` also records the first episode as a GIF.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from dqn_mine.play import fill_env_settings, make_env, record, save_gif
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="python -m dqn_mine.evaluate",
+                                 description=__doc__.split("\n\n")[0])
+    ap.add_argument("checkpoint", help="run folder or checkpoint.pt")
+    ap.add_argument("--episodes", type=int, default=20, help="episodes to play")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the first episode")
+    ap.add_argument("--epsilon", type=float, default=0.0, help="exploration rate while playing")
+    ap.add_argument("--task", default=None, help="task (default: the checkpoint's)")
+    ap.add_argument("--num-rooms", type=int, default=None, help="rooms of the rooms task")
+    ap.add_argument("--room-size", type=float, default=None, help="side of each room in units")
+    ap.add_argument("--placement", default=None, help="fixed or any-room")
+    ap.add_argument("--phase", type=int, default=None, help="curriculum phase (default: full task)")
+    ap.add_argument("--max-steps", type=int, default=None, help="step limit (default: the task's)")
+    ap.add_argument("--video", default=None, help="GIF of the first episode")
+    ap.add_argument("--out", default=None, help="eval.json path (default: next to the checkpoint)")
+    ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    return ap
+
+
+def play_episode(env, agent, seed: int) -> tuple[float, int]:
+    obs, info = env.reset(seed=seed)
+    agent.reset()
+    total, steps = 0.0, 0
+    while True:
+        obs, reward, terminated, truncated, info = env.step(agent.predict(obs, info))
+        total += reward
+        steps += 1
+        if terminated or truncated:
+            return total, steps
+
+
+def evaluate(env, agent, episodes: int, seed: int, progress: bool = True) -> dict:
+    """Scores of ``episodes`` episodes with seeds ``seed``, ``seed + 1``, ..."""
+    from tqdm import tqdm
+
+    returns, lengths = [], []
+    for i in tqdm(range(episodes), desc="evaluating", unit="episode", disable=not progress):
+        total, steps = play_episode(env, agent, seed + i)
+        returns.append(total)
+        lengths.append(steps)
+    returns = np.asarray(returns)
+    return {"episodes": episodes, "success_rate": float(np.mean(returns > 0)),
+            "mean_return": float(returns.mean()), "std_return": float(returns.std()),
+            "mean_length": float(np.mean(lengths)), "seed": seed}
+
+
+def check_settings(args: argparse.Namespace) -> None:
+    if args.episodes < 1:
+        raise ValueError(f"--episodes must be at least 1, got {args.episodes}")
+    if args.seed < 0:
+        raise ValueError(f"--seed must be >= 0, got {args.seed}")
+    if not 0.0 <= args.epsilon <= 1.0:
+        raise ValueError(f"--epsilon must be in [0, 1], got {args.epsilon}")
+    if args.video and Path(args.video).suffix.lower() != ".gif":
+        raise ValueError(f"--video must name a .gif file, got {args.video}")
+
+
+def output_path(args: argparse.Namespace) -> Path:
+    if args.out:
+        return Path(args.out)
+    ckpt = Path(args.checkpoint)
+    return (ckpt if ckpt.is_dir() else ckpt.parent) / "eval.json"
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    args.visual_randomisation = False
+    try:
+        check_settings(args)
+        from dqn_mine import load_agent
+
+        agent = load_agent(args.checkpoint, epsilon=args.epsilon, seed=args.seed)
+        fill_env_settings(args)
+        env = make_env(args)
+    except ValueError as exc:  # bad settings, or CheckpointError (a ValueError)
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        scores = evaluate(env, agent, args.episodes, args.seed, progress=not args.quiet)
+        if args.video:
+            agent.reset()
+            frames, _, _ = record(env, agent, args.seed, progress=not args.quiet)
+            save_gif(frames, Path(args.video), 15.0)
+    finally:
+        env.close()
+    scores.update(task=args.task, epsilon=args.epsilon, checkpoint=str(args.checkpoint))
+    out = output_path(args)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(scores, indent=1))
+    print(f"{args.task}, {scores['episodes']} episodes (seeds {args.seed}..."
+          f"{args.seed + args.episodes - 1}): return {scores['mean_return']:.3f} +- "
+          f"{scores['std_return']:.3f}, success {scores['success_rate']:.0%}, "
+          f"mean length {scores['mean_length']:.0f} -> {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
