@@ -95,6 +95,9 @@ def progress_postfix(row: Dict[str, float]) -> Dict[str, str]:
     out = {}
     for key, short in keys.items():
         value: Optional[float] = row.get(key)
-        if value is not None and not (isinstance(value, float) and math.isnan(value)):
-            out[short] = f"{value:.3g}"
+        if value is None or (isinstance(value, float) and math.isnan(value)):
+            continue
+        if key == "phase" and not value:  # 0 = no curriculum: nothing to watch
+            continue
+        out[short] = f"{value:.3g}"
     return out

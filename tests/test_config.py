@@ -237,3 +237,11 @@ def test_help_is_grouped_by_section():
     assert lines[section_of("--zeta")] == "replay:"
     assert lines[section_of("--epsilon ")] == "actors:"
     assert lines[section_of("--resume")] == "run:"
+
+
+def test_progress_bar_shows_phase_only_with_a_curriculum():
+    from dqn_mine.metrics import progress_postfix
+
+    row = {"episode_return": 0.25, "eval_return": float("nan"), "phase": 0, "loss": 1e-4}
+    assert progress_postfix(row) == {"ret": "0.25", "loss": "0.0001"}
+    assert progress_postfix({**row, "phase": 3})["phase"] == "3"

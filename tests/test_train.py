@@ -110,6 +110,10 @@ def test_serial_run_writes_the_run_folder(tmp_path):
     assert (run_dir / "checkpoint.pt").exists()
     summary = json.loads((run_dir / "summary.json").read_text())
     assert summary["updates"] == 60 and summary["exit_code"] == 0
+    # updates/s over training only, as the CSV measures it (start-up and pre-fill excluded)
+    csv_rate = sorted(float(r["updates_per_s"]) for r in rows)[1]
+    assert 0.5 * csv_rate < summary["updates_per_s"] < 2 * csv_rate
+    assert summary["return_episodes"] == min(summary["episodes"], 100)
 
 
 def test_resume_takes_the_new_learning_rate(tmp_path):

@@ -50,6 +50,7 @@ class Summary:
     updates_per_s: float
     env_steps_per_s: float
     replay_ratio: float
+    return_episodes: int = 0      # finished episodes (this process) behind episode_return
 
 
 class StopSignals:
@@ -289,6 +290,7 @@ class Run:
 
     def train(self) -> None:
         cfg, learner = self.cfg, self.learner
+        self.train_started = time.monotonic()
         bar = self._bar(total=cfg.updates, initial=learner.updates, desc="train", unit="upd")
         upd_rate = RateMeter(learner.updates)
         step_rate = RateMeter(self.control.total_actor_steps())
@@ -362,14 +364,19 @@ class Run:
         control = getattr(self, "control", None)
         wall = self.wall_time()
         steps = self.env_steps() if control is not None else self.steps_offset
-        train_time = max(1e-9, time.monotonic() - self.started)
+        run_time = max(1e-9, time.monotonic() - self.started)
+        # updates/s over the training phase only, as the bar and metrics.csv measure it (start-up
+        # and pre-fill excluded; a resumed run counts only its own updates)
+        train_started = getattr(self, "train_started", None)
+        learn_time = time.monotonic() - train_started if train_started is not None else 0.0
+        new_updates = updates - self.first_update
         return Summary(run_dir=str(self.run_dir), exit_code=code, reason=self.reason,
                        updates=updates, env_steps=steps, episodes=self.episodes, wall_time=wall,
                        episode_return=self.returns.mean,
-                       updates_per_s=updates / train_time if learner else 0.0,
-                       env_steps_per_s=(steps - self.steps_offset) / train_time,
+                       updates_per_s=new_updates / learn_time if learn_time > 0 else 0.0,
+                       env_steps_per_s=(steps - self.steps_offset) / run_time,
                        replay_ratio=self.replay_ratio() if learner and control is not None
-                       else math.nan)
+                       else math.nan, return_episodes=len(self.returns))
 
     def _bar(self, **kwargs):
         from tqdm import tqdm
