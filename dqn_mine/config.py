@@ -136,6 +136,8 @@ class Config:
     return_window: int = _f(100, "finished episodes in the rolling mean return and length")
     serial: bool = _f(False, "run actors and learner in one process (tests, debugging)")
     progress: bool = _f(True, "show the progress bar")
+    tensorboard: bool = _f(False, "also write every metrics row to TensorBoard event files in "
+                           "RUN_DIR/tb (needs the tensorboard package: pip install -e .[tb])")
 
     # -- checks ------------------------------------------------------------------------------
     def validate(self) -> "Config":
@@ -228,7 +230,11 @@ PRESETS: Dict[str, Dict[str, Any]] = {
 
 def _problems(c: Config) -> List[str]:
     """Every impossible setting, as one-line messages (first one is raised)."""
+    import importlib.util
+
     p = []
+    if c.tensorboard and importlib.util.find_spec("tensorboard") is None:
+        p.append("--tensorboard needs the tensorboard package (pip install -e .[tb])")
     for name in ("task", "placement", "curriculum", "epsilon_schedule", "init_priority",
                  "device", "actor_precision", "learner_precision", "exploration"):
         choices = _field(name).metadata["choices"]

@@ -18,9 +18,21 @@ COLUMNS = (
 
 
 class MetricsTable:
-    """Append-only CSV: a resumed run continues the same file under the same header."""
+    """Append-only CSV: a resumed run continues the same file under the same header.
 
-    def __init__(self, path: Path):
+    With ``tensorboard_dir`` every row also goes to TensorBoard event files there (one scalar per
+    column against the update count, ``config`` as text); the CSV stays the source of truth.
+    """
+
+    def __init__(self, path: Path, tensorboard_dir: Optional[Path] = None,
+                 config_text: str = ""):
+        self._tb = None
+        if tensorboard_dir is not None:
+            from torch.utils.tensorboard import SummaryWriter
+
+            self._tb = SummaryWriter(log_dir=str(tensorboard_dir))
+            if config_text:
+                self._tb.add_text("config", config_text, 0)
         self.path = Path(path)
         fresh = not self.path.exists() or self.path.stat().st_size == 0
         self._file = open(self.path, "a", newline="")
@@ -32,9 +44,18 @@ class MetricsTable:
     def write(self, row: Dict[str, float]) -> None:
         self._writer.writerow({k: _fmt(row.get(k)) for k in COLUMNS})
         self._file.flush()
+        if self._tb is not None:
+            step = int(row.get("update", 0))
+            for key in COLUMNS[1:]:
+                value = row.get(key)
+                if isinstance(value, (int, float)) and not math.isnan(value):
+                    self._tb.add_scalar(key, value, step)
+            self._tb.flush()
 
     def close(self) -> None:
         self._file.close()
+        if self._tb is not None:
+            self._tb.close()
 
 
 def _fmt(value) -> str:

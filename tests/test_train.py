@@ -272,3 +272,20 @@ def test_smoke_preset_learns_one_room(tmp_path):
     rows = metrics_rows(run_dir)
     final = float(rows[-1]["episode_return"])
     assert final >= 0.8, f"smoke preset ended at mean return {final:.2f}"
+
+
+def test_tensorboard_event_files_hold_every_metrics_row(tmp_path):
+    pytest.importorskip("tensorboard")
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    run_dir = tmp_path / "tb"
+    res = run_train(*TINY, "--serial", "--updates", "40", "--tensorboard",
+                    "--run-dir", str(run_dir))
+    assert res.returncode == 0, res.stderr[-3000:]
+    events = EventAccumulator(str(run_dir / "tb"))
+    events.Reload()
+    rows = metrics_rows(run_dir)
+    loss = events.Scalars("loss")
+    assert [e.step for e in loss] == [int(r["update"]) for r in rows] == [20, 40]
+    assert loss[-1].value == pytest.approx(float(rows[-1]["loss"]), rel=1e-4)
+    assert any(tag.startswith("config") for tag in events.Tags()["tensors"])   # the config text

@@ -8,6 +8,7 @@ actor, writes a resumable checkpoint and unlinks every shared segment.
 
 from __future__ import annotations
 
+import json
 import math
 import multiprocessing as mp
 import signal
@@ -245,7 +246,12 @@ class Run:
                 self.learner.publish()  # actors start from the learner's weights
                 self.actors = (InlineActors(self.cfg, storage, self.control, weights)
                                if self.serial else ProcessActors(self.cfg, blocks.handle()))
-                self.metrics = MetricsTable(self.run_dir / "metrics.csv")
+                self.metrics = MetricsTable(
+                    self.run_dir / "metrics.csv",
+                    self.run_dir / "tb" if self.cfg.tensorboard else None,
+                    # indented: TensorBoard's text tab shows it as a code block
+                    "\n".join("    " + line for line in
+                              json.dumps(self.cfg.to_dict(), indent=1).splitlines()))
                 try:
                     self.prefill()
                     self.train()
