@@ -289,3 +289,19 @@ def test_tensorboard_event_files_hold_every_metrics_row(tmp_path):
     assert [e.step for e in loss] == [int(r["update"]) for r in rows] == [20, 40]
     assert loss[-1].value == pytest.approx(float(rows[-1]["loss"]), rel=1e-4)
     assert any(tag.startswith("config") for tag in events.Tags()["tensors"])   # the config text
+
+
+def test_serial_runs_are_deterministic_from_their_seed(tmp_path):
+    """--serial (actors and learner in one process, no sampling thread): the same seed gives the
+    same metrics row for row, timings aside; a parallel run is not reproducible (its processes
+    interleave as the OS schedules them)."""
+    timing = {"wall_time", "updates_per_s", "env_steps_per_s"}
+    tables = []
+    for name in ("a", "b"):
+        res = run_train(*TINY, "--serial", "--updates", "40", "--seed", "3",
+                        "--run-dir", str(tmp_path / name))
+        assert res.returncode == 0, res.stderr[-3000:]
+        tables.append([{k: v for k, v in r.items() if k not in timing}
+                       for r in metrics_rows(tmp_path / name)])
+    assert len(tables[0]) == 2 and tables[0] == tables[1]
+    assert float(tables[0][-1]["loss"]) > 0
