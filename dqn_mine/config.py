@@ -30,7 +30,7 @@ except ImportError:
 PLACEMENTS = ("fixed", "any-room")
 DEVICES = ("auto", "cpu", "cuda")
 ACTOR_PRECISIONS = ("auto", "float32", "bfloat16")
-LEARNER_PRECISIONS = ("auto", "float32", "bfloat16")
+LEARNER_PRECISIONS = ACTOR_PRECISIONS   # auto, or a dtype by name
 EPSILON_SCHEDULES = ("fixed", "apex")
 INIT_PRIORITIES = ("actor", "max")
 CURRICULA = ("none", "adaptive", "schedule")

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dqn_mine.play import fill_env_settings, make_env, record, save_gif
+from dqn_mine.play import (add_episode_arguments, check_episode_settings, fill_env_settings,
+                           make_env, record, save_gif)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -23,14 +24,7 @@ def build_parser() -> argparse.ArgumentParser:
                                  description=__doc__.split("\n\n")[0])
     ap.add_argument("checkpoint", help="run folder or checkpoint.pt")
     ap.add_argument("--episodes", type=int, default=20, help="episodes to play")
-    ap.add_argument("--seed", type=int, default=0, help="seed of the first episode")
-    ap.add_argument("--epsilon", type=float, default=0.0, help="exploration rate while playing")
-    ap.add_argument("--task", default=None, help="task (default: the checkpoint's)")
-    ap.add_argument("--num-rooms", type=int, default=None, help="rooms of the rooms task")
-    ap.add_argument("--room-size", type=float, default=None, help="side of each room in units")
-    ap.add_argument("--placement", default=None, help="fixed or any-room")
-    ap.add_argument("--phase", type=int, default=None, help="curriculum phase (default: full task)")
-    ap.add_argument("--max-steps", type=int, default=None, help="step limit (default: the task's)")
+    add_episode_arguments(ap)
     ap.add_argument("--video", default=None, help="GIF of the first episode")
     ap.add_argument("--out", default=None, help="eval.json path (default: next to the checkpoint)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -67,10 +61,7 @@ def evaluate(env, agent, episodes: int, seed: int, progress: bool = True) -> dic
 def check_settings(args: argparse.Namespace) -> None:
     if args.episodes < 1:
         raise ValueError(f"--episodes must be at least 1, got {args.episodes}")
-    if args.seed < 0:
-        raise ValueError(f"--seed must be >= 0, got {args.seed}")
-    if not 0.0 <= args.epsilon <= 1.0:
-        raise ValueError(f"--epsilon must be in [0, 1], got {args.epsilon}")
+    check_episode_settings(args)
     if args.video and Path(args.video).suffix.lower() != ".gif":
         raise ValueError(f"--video must name a .gif file, got {args.video}")
 
@@ -84,7 +75,6 @@ def output_path(args: argparse.Namespace) -> Path:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    args.visual_randomisation = False
     try:
         check_settings(args)
         from dqn_mine import load_agent

@@ -113,24 +113,15 @@ def save_gif(frames: list[np.ndarray], path: Path, fps: float) -> None:
 
 def check_output_settings(args: argparse.Namespace, out: Path) -> None:
     """What would only fail after a whole episode was recorded: fail before it instead."""
-    if args.seed < 0:
-        raise ValueError(f"--seed must be >= 0, got {args.seed}")
+    check_episode_settings(args)
     if not args.fps > 0:
         raise ValueError(f"--fps must be positive, got {args.fps}")
-    if not 0.0 <= args.epsilon <= 1.0:
-        raise ValueError(f"--epsilon must be in [0, 1], got {args.epsilon}")
     if out.suffix.lower() != ".gif" or out.is_dir():
         raise ValueError(f"--out must name a .gif file, got {out}")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m dqn_mine.play",
-                                 description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--policy", choices=sorted(POLICIES), default=None,
-                    help="who acts (default: agent with --checkpoint, else expert)")
-    ap.add_argument("--checkpoint", default=None,
-                    help="trained agent: a run folder or checkpoint.pt (its task is the default)")
+def add_episode_arguments(ap: argparse.ArgumentParser) -> None:
+    """The flags that set up the episodes (``play`` and ``evaluate`` share them)."""
     ap.add_argument("--epsilon", type=float, default=0.0, help="agent's exploration rate")
     ap.add_argument("--task", default=None, help="one-room, two-room, three-room or rooms "
                     "(default: the checkpoint's, else two-room, as for train)")
@@ -142,8 +133,26 @@ def build_parser() -> argparse.ArgumentParser:
                     help="curriculum phase: 1..6 of three-room, 1..4 of two-room")
     ap.add_argument("--visual-randomisation", action="store_true",
                     help="random light, wall colour and field of view")
-    ap.add_argument("--seed", type=int, default=0, help="episode seed")
+    ap.add_argument("--seed", type=int, default=0, help="episode seed (the first one)")
     ap.add_argument("--max-steps", type=int, default=None, help="step limit (default: the task's)")
+
+
+def check_episode_settings(args: argparse.Namespace) -> None:
+    if args.seed < 0:
+        raise ValueError(f"--seed must be >= 0, got {args.seed}")
+    if not 0.0 <= args.epsilon <= 1.0:
+        raise ValueError(f"--epsilon must be in [0, 1], got {args.epsilon}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="python -m dqn_mine.play",
+                                 description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--policy", choices=sorted(POLICIES), default=None,
+                    help="who acts (default: agent with --checkpoint, else expert)")
+    ap.add_argument("--checkpoint", default=None,
+                    help="trained agent: a run folder or checkpoint.pt (its task is the default)")
+    add_episode_arguments(ap)
     ap.add_argument("--fps", type=float, default=15.0, help="frames per second of the GIF")
     ap.add_argument("--out", default=None, help="GIF to write (default runs/play/<policy>.gif)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -203,7 +203,8 @@ class DQNUpdater:
             batch = batch._replace(obs=batch.obs.to(torch.bfloat16),
                                    next_obs=batch.next_obs.to(torch.bfloat16))
         loss, td_abs, q_taken = td_loss(online, target, batch)
-        self.optimizer.zero_grad(set_to_none=True)
+        # the network the loss went through; in bfloat16 the masters' gradients are then
+        # replaced wholesale by push_gradients
         online.zero_grad(set_to_none=True)
         loss.backward()
         if self._work is not None:

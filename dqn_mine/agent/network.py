@@ -83,6 +83,7 @@ class DuelingQNetwork(nn.Module):
         advantage = _stream(self.advantage, features)  # [B, A]
         return value + advantage - advantage.mean(dim=1, keepdim=True)  # [B, A]
 
+
 def _stream(stream: nn.Sequential, features: torch.Tensor) -> torch.Tensor:
     """linear, ReLU, linear; the last layer computes in its own weights' dtype."""
     hidden = stream[1](stream[0](features))
@@ -100,7 +101,6 @@ class WorkingCopy:
     """
 
     def __init__(self, master: DuelingQNetwork, dtype: torch.dtype):
-        self.master = master
         self.net = copy.deepcopy(master)
         for layer in (self.net.conv, self.net.value[0], self.net.advantage[0]):
             layer.to(dtype)

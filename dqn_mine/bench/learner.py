@@ -66,20 +66,19 @@ def side_by_side(steps: Dict[str, Callable[[], None]], seconds: float, rounds: i
 
 # -- compute accounting ------------------------------------------------------------------------
 
-def forward_flops(net: nn.Module) -> Dict[str, float]:
-    """Multiply-adds x 2 of one frame's forward pass, per layer kind (convs, linears)."""
-    flops = {"conv": 0.0, "linear": 0.0}
+def _layer_flops(module: nn.Module, output: torch.Tensor) -> float:
+    """Multiply-adds x 2 of one conv or linear layer for one frame (``output``: batch of 1)."""
+    if isinstance(module, nn.Conv2d):
+        k = module.in_channels // module.groups * module.kernel_size[0] * module.kernel_size[1]
+        return 2.0 * k * output[0].numel()
+    return 2.0 * module.in_features * module.out_features
 
-    def count(module, inputs, output):
-        if isinstance(module, nn.Conv2d):
-            k = module.in_channels // module.groups * module.kernel_size[0] * \
-                module.kernel_size[1]
-            flops["conv"] += 2.0 * k * output[0].numel()
-        elif isinstance(module, nn.Linear):
-            flops["linear"] += 2.0 * module.in_features * module.out_features
 
-    hooks = [m.register_forward_hook(count) for m in net.modules()
-             if isinstance(m, (nn.Conv2d, nn.Linear))]
+def _per_layer_flops(net: nn.Module) -> List[tuple]:
+    """(layer, FLOPs) of one frame's forward pass, in the order the layers run."""
+    layers: List[tuple] = []
+    hooks = [m.register_forward_hook(lambda m, i, out: layers.append((m, _layer_flops(m, out))))
+             for m in net.modules() if isinstance(m, (nn.Conv2d, nn.Linear))]
     try:
         with torch.no_grad():
             net(torch.zeros(1, *net.obs_shape, dtype=torch.uint8),
@@ -87,6 +86,14 @@ def forward_flops(net: nn.Module) -> Dict[str, float]:
     finally:
         for h in hooks:
             h.remove()
+    return layers
+
+
+def forward_flops(net: nn.Module) -> Dict[str, float]:
+    """Multiply-adds x 2 of one frame's forward pass, per layer kind (convs, linears)."""
+    flops = {"conv": 0.0, "linear": 0.0}
+    for module, f in _per_layer_flops(net):
+        flops["conv" if isinstance(module, nn.Conv2d) else "linear"] += f
     return flops
 
 
@@ -94,17 +101,10 @@ def update_flops(net: DuelingQNetwork, batch_size: int) -> float:
     """FLOPs of one update: three forward passes (online on s and s', target on s'), and a
     backward pass of the one on s: weight gradients (as much as its forward) and input gradients
     (as much again, except for the first layer, whose input needs none)."""
-    per_frame = forward_flops(net)
-    forward = per_frame["conv"] + per_frame["linear"]
-    first = _first_layer_flops(net)
+    layers = _per_layer_flops(net)
+    forward = sum(f for _, f in layers)
+    first = layers[0][1]
     return batch_size * (3 * forward + forward + (forward - first))
-
-
-def _first_layer_flops(net: DuelingQNetwork) -> float:
-    with torch.no_grad():
-        out = net.conv[0](torch.zeros(1, *net.obs_shape))
-    w = net.conv[0].weight
-    return 2.0 * w[0].numel() * out.numel()
 
 
 def gemm_limit(dtype: torch.dtype, n: int = 2048, seconds: float = 1.0) -> float:
@@ -174,7 +174,7 @@ def learner_section(quick: bool) -> List[str]:
     seconds, rounds = (0.3, 3) if quick else (0.6, 7)
     cores = os.cpu_count() or 1
     precisions = cpu_precisions()
-    net = DuelingQNetwork()
+    per_sample = update_flops(DuelingQNetwork(), 1)
     lines = [
         "## Learner (synthetic batches)\n",
         f"torch {torch.__version__}; an update = double-DQN target, IS-weighted Huber, backward, "
@@ -182,7 +182,7 @@ def learner_section(quick: bool) -> List[str]:
         "is the plain update (the reference); bfloat16 computes convolutions and the first head "
         "layers in bfloat16 with float32 master weights, outputs, loss and Adam "
         "(`--learner-precision`). Variants timed in turns, median of "
-        f"{rounds} rounds. An update is {update_flops(net, 1) / 1e6:.1f} MFLOP per sample "
+        f"{rounds} rounds. An update is {per_sample / 1e6:.1f} MFLOP per sample "
         "(3 forward passes + backward); 'limit' = a 2048^2 matrix product in the same dtype "
         "and threads.\n",
         "| device | torch threads | batch | precision | updates/s | ms/update | vs float32 | "
@@ -194,7 +194,7 @@ def learner_section(quick: bool) -> List[str]:
         for b in (32, 64, 256):
             rates = learner_rates(precisions, b, "cpu", seconds, rounds)
             for p in precisions:
-                lines.append(_row("cpu", threads, b, p, rates, net, limits[p]))
+                lines.append(_row("cpu", threads, b, p, rates, per_sample, limits[p]))
     if cores > 1:
         for threads in sorted({1, cores}):
             for p in precisions:
@@ -202,7 +202,7 @@ def learner_section(quick: bool) -> List[str]:
                 lines.append(f"| cpu, 1 core busy | {threads} | 32 | {p} | {r:.1f} | "
                              f"{1000 / r:.1f} | | | | |")
     if torch.cuda.is_available():
-        lines += cuda_rows(net, seconds, rounds)
+        lines += cuda_rows(per_sample, seconds, rounds)
     lines += ["", "Alone, 2 threads nearly double batch-32 updates; next to one busy process "
               "(an actor) 2 threads can collapse to a few updates/s, far below 1 thread (the "
               "'1 core busy' rows: OpenMP threads wait on each other across a contended "
@@ -211,21 +211,22 @@ def learner_section(quick: bool) -> List[str]:
     return lines
 
 
-def cuda_rows(net: DuelingQNetwork, seconds: float, rounds: int) -> List[str]:
+def cuda_rows(per_sample: float, seconds: float, rounds: int) -> List[str]:
     name = torch.cuda.get_device_name()
     precisions = ["float32"] + (["bfloat16"] if torch.cuda.is_bf16_supported() else [])
     lines = []
     for b in (32, 256, 512):
         rates = learner_rates(precisions, b, "cuda", seconds, rounds)
         for p in precisions:
-            lines.append(_row(f"cuda ({name})", "-", b, p, rates, net, float("nan")))
+            lines.append(_row(f"cuda ({name})", "-", b, p, rates, per_sample, float("nan")))
     return lines
 
 
 def _row(device, threads, b: int, precision: str, rates: Dict[str, float],
-         net: DuelingQNetwork, limit: float) -> str:
+         per_sample: float, limit: float) -> str:
+    """``per_sample``: FLOPs of an update per sample (``update_flops(net, 1)``)."""
     r = rates[precision]
-    reached = r * update_flops(net, b)
+    reached = r * per_sample * b
     ratio = limit / reached if limit == limit else float("nan")
     return (f"| {device} | {threads} | {b} | {precision} | {r:.1f} | {1000 / r:.2f} | "
             f"{r / rates['float32']:.2f}x | {reached / 1e9:.0f} | {limit / 1e9:.0f} | "

@@ -172,6 +172,7 @@ class Run:
         self.curriculum_returns = Rolling(cfg.curriculum_window)
         self.phase = int(counters.get("phase", initial_phase(cfg)))
         self.first_update = int(counters.get("updates", 0))
+        self.train_started: Optional[float] = None   # monotonic time the update loop began
         self.train_start_steps = 0
         self.started = time.monotonic()
         self.reason = "finished"
@@ -373,8 +374,7 @@ class Run:
         run_time = max(1e-9, time.monotonic() - self.started)
         # updates/s over the training phase only, as the bar and metrics.csv measure it (start-up
         # and pre-fill excluded; a resumed run counts only its own updates)
-        train_started = getattr(self, "train_started", None)
-        learn_time = time.monotonic() - train_started if train_started is not None else 0.0
+        learn_time = 0.0 if self.train_started is None else time.monotonic() - self.train_started
         new_updates = updates - self.first_update
         return Summary(run_dir=str(self.run_dir), exit_code=code, reason=self.reason,
                        updates=updates, env_steps=steps, episodes=self.episodes, wall_time=wall,
