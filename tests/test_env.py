@@ -284,9 +284,13 @@ def test_pick_up_and_drop(envs):
     obs, reward, terminated, _, info = env.step(INTERACT)
     assert info["carrying"] and info["carrying_kit"] and reward == 0.0 and not terminated
     assert env.carrying is kit and kit not in env.world_entities()
-    assert _red_pixels(obs) == 0, "a carried kit is no longer drawn in the world"
+    held = _red_mask(obs)
+    h, w = held.shape
+    assert held[h // 2:, w // 3: 2 * w // 3].sum() > 20 and held.sum() == held[h // 2:].sum(), \
+        "a carried kit is drawn in hand: at the bottom centre of the view"
     for _ in range(3):
-        env.step(RIGHT)
+        obs, *_ = env.step(RIGHT)
+        assert (_red_mask(obs) == held).all(), "the held kit turns with the agent"
     obs, _, _, _, info = env.step(INTERACT)
     assert not info["carrying"] and env.carrying is None
     c, s = env.direction
@@ -335,6 +339,10 @@ def test_exchange_swaps_held_and_faced_items(envs):
     _, _, _, _, info = env.step(INTERACT)
     assert env.carrying is boulder and info["carrying"] and not info["carrying_kit"]
     assert (kit.x, kit.z) == (bx, bz)
+    h, w = env._last_obs.shape[1:]
+    hand = env._last_obs[:, -h // 4:, w // 2 - 4: w // 2 + 4].reshape(3, -1).mean(axis=1)
+    assert hand.min() > 60 and hand.max() - hand.min() < 25, \
+        f"the agent sees it now holds a grey boulder, not the red kit: {hand}"
     assert kit in env.world_entities() and boulder not in env.world_entities()
 
 
@@ -462,9 +470,13 @@ def test_env_does_not_import_torch():
 # --- rendering for people ----------------------------------------------------------------------
 
 
-def _red_pixels(obs):
+def _red_mask(obs):
     r, g, b = (obs[i].astype(int) for i in range(3))
-    return int(((r > 120) & (g < 60) & (b < 60)).sum())
+    return (r > 120) & (g < 60) & (b < 60)
+
+
+def _red_pixels(obs):
+    return int(_red_mask(obs).sum())
 
 
 def test_render_and_map():

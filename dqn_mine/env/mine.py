@@ -15,7 +15,7 @@ import numpy as np
 from gymnasium import spaces
 
 from dqn_mine.env import mesh
-from dqn_mine.env.entities import BOULDER, KIT, MINER, Entity
+from dqn_mine.env.entities import BOULDER, KIT, MINER, Entity, local_mesh
 from dqn_mine.env.layout import Door, Layout, generate_layout
 
 OBS_HEIGHT, OBS_WIDTH = 44, 76
@@ -39,6 +39,12 @@ REACH_RADIUS = 0.6                 # ... and its radius
 # (docs/exploration.md).
 CARRY_AHEAD_FACTOR = 1.05
 NEAR_STEPS = 1.1
+# The carried item is drawn where it is held, its top this far below the eye (MiniWorld lifts a
+# carried entity to camera height - its height - 0.3). It shows at the bottom centre of the view,
+# so the agent sees *what* it carries: the carrying flag alone cannot tell the kit from a boulder.
+# Unlike MiniWorld a tall item is sunk rather than stood on the floor, so a boulder (1.6 high,
+# above the eye) does not blind the agent while it carries it out of a doorway.
+HELD_TOP_BELOW_EYE = 0.3
 DROP_GAP = 0.1                     # space between the agent and an item it puts down
 DOOR_CLEARANCE = 2.5               # kit, miner and agent start at least this far from doorways
 ASIDE_CLEARANCE = 3.5              # boulders moved aside lie at least this far from doorways
@@ -235,7 +241,7 @@ class MineEnv(gym.Env):
 
     def carry_position(self, item: Entity) -> tuple[float, float]:
         """Where a carried ``item`` is held: in front of the agent (MiniWorld's carry position)."""
-        ahead = CARRY_AHEAD_FACTOR * (AGENT_RADIUS + item.radius + FORWARD_STEP)
+        ahead = _carry_ahead(item)
         return (self.agent_x + ahead * _COS[self.heading],
                 self.agent_z + ahead * _SIN[self.heading])
 
@@ -311,16 +317,28 @@ class MineEnv(gym.Env):
             self._scene = Scene(OBS_WIDTH, OBS_HEIGHT, FOV_Y, EYE_HEIGHT, far)
         dynamic = (np.concatenate([e.vertices() for e in world]) if world
                    else np.zeros((0, mesh.VERTEX_FLOATS), np.float32))
+        held = self._held_mesh()
         if self.randomise_visuals:
-            dynamic[:, 3:6] *= self.light   # concatenate made a copy: the cached meshes stay
+            dynamic[:, 3:6] *= self.light   # concatenate and place made copies: the cached
+            held[:, 3:6] *= self.light      # meshes stay
         if static:
             static_mesh = mesh.static_scene(self.layout, WALL_HEIGHT, DOOR_HEIGHT)
             if self.randomise_visuals:
                 static_mesh[:, 3:6] *= self.light * self.tint
             self._scene.set_fov(self.fov_y)
-            self._scene.set_static(static_mesh, dynamic)
+            self._scene.set_static(static_mesh, dynamic, held)
         else:
-            self._scene.set_dynamic(dynamic)
+            self._scene.set_dynamic(dynamic, held)
+
+    def _held_mesh(self) -> np.ndarray:
+        """The carried item in the camera's frame (eye at the origin, looking along +x)."""
+        item = self.carrying
+        if item is None:
+            return np.zeros((0, mesh.VERTEX_FLOATS), np.float32)
+        local = local_mesh(item.kind)
+        out = mesh.place(local, _carry_ahead(item), 0.0, 1.0, 0.0)
+        out[:, 1] += EYE_HEIGHT - HELD_TOP_BELOW_EYE - local[:, 1].max()
+        return out
 
     def _observe(self) -> np.ndarray:
         obs = self._scene.render(self.agent_x, self.agent_z, _COS[self.heading], _SIN[self.heading])
@@ -380,6 +398,10 @@ class MineEnv(gym.Env):
                 continue
             return x, z
         raise RuntimeError(f"no free spot in room {room}; is room_size too small?")
+
+
+def _carry_ahead(item: Entity) -> float:
+    return CARRY_AHEAD_FACTOR * (AGENT_RADIUS + item.radius + FORWARD_STEP)
 
 
 def _as_action(action) -> int:

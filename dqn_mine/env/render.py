@@ -4,8 +4,8 @@ One GL context per process, created lazily on the first render and shared by eve
 that process (an actor may own several). Each environment owns one vertex buffer: the static
 part (walls, floor, ceiling, door frames) is written once per reset and the entity part only when
 an entity moves (pick up, drop, exchange), so a step uploads nothing but one uniform and issues
-one draw call. The camera transform is done in the vertex shader from (x, z, cos, sin), so no
-matrices are built in Python.
+one draw call (two while an item is carried). The camera transform is done in the vertex shader
+from (x, z, cos, sin), so no matrices are built in Python.
 """
 
 from __future__ import annotations
@@ -135,6 +135,7 @@ class Scene:
         self.vao = None
         self.static_n = 0
         self.count = 0
+        self.held_n = 0
 
     def set_fov(self, fov_y: float) -> None:
         """Vertical field of view in degrees (a new projection tuple, so render() uploads it)."""
@@ -146,7 +147,8 @@ class Scene:
         self.projection = (f * self.aspect, f,
                            (far + near) / (near - far), 2 * far * near / (near - far))
 
-    def set_static(self, static: np.ndarray, dynamic: np.ndarray) -> None:
+    def set_static(self, static: np.ndarray, dynamic: np.ndarray,
+                   held: np.ndarray | None = None) -> None:
         """Upload a new scene (at reset): static geometry followed by the entities."""
         self.static_n = len(static)
         # Room for the entities to grow (a dropped item reappears) without reallocating.
@@ -159,16 +161,23 @@ class Scene:
             self.vao = ctx.vertex_array(
                 self.g.prog, [(self.vbo, VERTEX_FORMAT, "in_pos", "in_col", "in_mat")])
         self.vbo.write(static)
-        self.set_dynamic(dynamic)
+        self.set_dynamic(dynamic, held)
 
-    def set_dynamic(self, dynamic: np.ndarray) -> None:
-        """Rewrite the entity part of the buffer (after an entity moved)."""
+    def set_dynamic(self, dynamic: np.ndarray, held: np.ndarray | None = None) -> None:
+        """Rewrite the entity part of the buffer (after an entity moved).
+
+        ``held`` is the carried item in the camera's own frame (eye at x = z = 0 looking along +x),
+        drawn after the world from that fixed frame: it stays in front of the agent without a
+        buffer upload per step, and the shared depth buffer still lets a near wall hide it.
+        """
         offset = self.static_n * VERTEX_FLOATS * 4
-        if offset + dynamic.nbytes > self.capacity:
+        held = held if held is not None else dynamic[:0]
+        if offset + dynamic.nbytes + held.nbytes > self.capacity:
             raise RuntimeError("entity geometry outgrew its vertex buffer")
-        if len(dynamic):
-            self.vbo.write(dynamic, offset=offset)
+        if len(dynamic) or len(held):
+            self.vbo.write(np.concatenate([dynamic, held]), offset=offset)
         self.count = self.static_n + len(dynamic)
+        self.held_n = len(held)
 
     def render(self, x: float, z: float, cos: float, sin: float) -> np.ndarray:
         """The first-person image from (x, z) looking along (cos, sin): uint8 (3, H, W)."""
@@ -180,6 +189,9 @@ class Scene:
         g.cam.value = (x, z, cos, sin)
         g.fbo.clear(0.0, 0.0, 0.0, 1.0)
         self.vao.render(vertices=self.count)
+        if self.held_n:
+            g.cam.value = (0.0, 0.0, 1.0, 0.0)
+            self.vao.render(vertices=self.held_n, first=self.count)
         g.fbo.read_into(g.pixels, components=3)
         return g.pixels.transpose(2, 0, 1).copy()
 
