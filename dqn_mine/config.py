@@ -37,6 +37,9 @@ CURRICULA = ("none", "adaptive", "schedule")
 EXPLORATIONS = ("epsilon", "ez")
 
 
+DIFFERENCES_KEY = "differs_from_preset"   # in config.json: what the flags changed
+
+
 class ConfigError(ValueError):
     """An impossible or unreadable configuration; the message is one line."""
 
@@ -66,6 +69,8 @@ class Config:
                          "counts by share of updates", CURRICULA)
     curriculum_threshold: float = _f(0.6, "rolling mean return that advances a curriculum phase")
     curriculum_window: int = _f(50, "episodes in the rolling mean that advances the curriculum")
+    curriculum_review: float = _f(0.0, "adaptive curriculum: share of episodes that start in an "
+                                  "easier phase already passed (0 = the study's rule)")
     rooms_schedule: Tuple[int, ...] = _f((3, 4, 5), "room counts of the schedule curriculum, each "
                                          "for an equal share of the updates")
     # -- actors ------------------------------------------------------------------------------
@@ -117,6 +122,9 @@ class Config:
     eta: float = _f(1e-5, "added to |TD error| so no priority is zero")
     init_priority: str = _f("actor", "priority of new transitions: actor (from the actor's "
                             "network) or max (largest so far)", INIT_PRIORITIES)
+    save_replay: Optional[str] = _f(None, "also save the replay to this folder at the end "
+                                    "(large; size printed first); --resume reads it back and "
+                                    "skips the pre-fill")
     # -- evaluation --------------------------------------------------------------------------
     eval_every: int = _f(0, "evaluation actor: evaluate every N training env steps (0 = off)")
     eval_episodes: int = _f(10, "episodes per evaluation")
@@ -158,13 +166,22 @@ class Config:
     def to_dict(self) -> Dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
 
+    def preset_differences(self) -> Dict[str, Any]:
+        """The settings in which this config differs from its preset (run folders aside)."""
+        preset = Config(**{**PRESETS.get(self.preset, {}), "preset": self.preset})
+        return {name: value for name, value in self.to_dict().items()
+                if name not in ("run_dir", "resume") and value != getattr(preset, name)}
+
     def to_json(self, path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+        """All settings, plus (for people; ignored on load) those that differ from the preset."""
+        data = {**self.to_dict(), DIFFERENCES_KEY: self.preset_differences()}
+        Path(path).write_text(json.dumps(data, indent=2) + "\n")
 
     @classmethod
     def from_dict(cls, data: Dict[str, Any], where: str = "config") -> "Config":
         if not isinstance(data, dict):
             raise ConfigError(f"{where}: expected a json object")
+        data = {k: v for k, v in data.items() if k != DIFFERENCES_KEY}
         hints = _hints()
         unknown = sorted(set(data) - set(hints))
         if unknown:
@@ -273,6 +290,8 @@ def _problems(c: Config) -> List[str]:
     for name in ("epsilon", "eval_epsilon"):
         if not 0.0 <= getattr(c, name) <= 1.0:
             p.append(f"--{_flag(name)} must be in [0, 1], got {getattr(c, name)}")
+    if not 0.0 <= c.curriculum_review < 1.0:
+        p.append(f"--curriculum-review must be in [0, 1), got {c.curriculum_review}")
     if not c.ez_mu > 1.0:
         p.append(f"--ez-mu must be greater than 1, got {c.ez_mu}")
     if not c.lr > 0:

@@ -3,7 +3,9 @@
 Plays N episodes (seeds S, S+1, ...) greedily, or with ``--epsilon``, on the task the checkpoint
 was trained on unless ``--task`` and the other environment flags say otherwise; prints the mean
 and spread of the return, the success rate and the mean length, and writes ``eval.json`` next to
-the checkpoint (``--out`` elsewhere). ``--video PATH`` also records the first episode as a GIF.
+the checkpoint (``--out`` elsewhere). ``--video PATH`` also records the first episode (GIF, or MP4 with imageio-ffmpeg). ``outcomes``
+counts how the episodes ended: delivered, still holding the kit or a boulder, the kit taken and
+dropped again, the kit never taken.
 """
 
 from __future__ import annotations
@@ -15,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dqn_mine.play import (add_episode_arguments, check_episode_settings, fill_env_settings,
-                           make_env, record, save_gif)
+from dqn_mine.play import (add_episode_arguments, check_episode_settings, check_video_path,
+                           fill_env_settings, make_env, record, save_video)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -25,45 +27,61 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("checkpoint", help="run folder or checkpoint.pt")
     ap.add_argument("--episodes", type=int, default=20, help="episodes to play")
     add_episode_arguments(ap)
-    ap.add_argument("--video", default=None, help="GIF of the first episode")
+    ap.add_argument("--video", default=None, help="video of the first episode (.gif or .mp4)")
     ap.add_argument("--out", default=None, help="eval.json path (default: next to the checkpoint)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     return ap
 
 
-def play_episode(env, agent, seed: int) -> tuple[float, int]:
+# How an episode ended, for eval.json's "outcomes": what failed, not only that it did.
+OUTCOMES = ("delivered", "holding the kit", "holding a boulder", "kit dropped",
+            "kit never taken")
+
+
+def play_episode(env, agent, seed: int) -> tuple[float, int, str]:
+    """Return, length and outcome (one of OUTCOMES) of one episode."""
     obs, info = env.reset(seed=seed)
     agent.reset()
-    total, steps = 0.0, 0
+    total, steps, had_kit = 0.0, 0, info["carrying_kit"]
     while True:
         obs, reward, terminated, truncated, info = env.step(agent.predict(obs, info))
         total += reward
         steps += 1
+        had_kit = had_kit or info["carrying_kit"]
         if terminated or truncated:
-            return total, steps
+            return total, steps, _outcome(env.unwrapped, terminated, had_kit)
+
+
+def _outcome(env, terminated: bool, had_kit: bool) -> str:
+    if terminated:
+        return "delivered"
+    if env.carrying is not None:
+        return "holding the kit" if env.carrying.kind == "kit" else "holding a boulder"
+    return "kit dropped" if had_kit else "kit never taken"
 
 
 def evaluate(env, agent, episodes: int, seed: int, progress: bool = True) -> dict:
     """Scores of ``episodes`` episodes with seeds ``seed``, ``seed + 1``, ..."""
     from tqdm import tqdm
 
-    returns, lengths = [], []
+    returns, lengths, outcomes = [], [], dict.fromkeys(OUTCOMES, 0)
     for i in tqdm(range(episodes), desc="evaluating", unit="episode", disable=not progress):
-        total, steps = play_episode(env, agent, seed + i)
+        total, steps, outcome = play_episode(env, agent, seed + i)
         returns.append(total)
         lengths.append(steps)
+        outcomes[outcome] += 1
     returns = np.asarray(returns)
     return {"episodes": episodes, "success_rate": float(np.mean(returns > 0)),
             "mean_return": float(returns.mean()), "std_return": float(returns.std()),
-            "mean_length": float(np.mean(lengths)), "seed": seed}
+            "mean_length": float(np.mean(lengths)), "seed": seed, "outcomes": outcomes}
 
 
 def check_settings(args: argparse.Namespace) -> None:
     if args.episodes < 1:
         raise ValueError(f"--episodes must be at least 1, got {args.episodes}")
     check_episode_settings(args)
-    if args.video and Path(args.video).suffix.lower() != ".gif":
-        raise ValueError(f"--video must name a .gif file, got {args.video}")
+    if args.video:
+        check_video_path(Path(args.video), "--video")
 
 
 def output_path(args: argparse.Namespace) -> Path:
@@ -90,7 +108,7 @@ def main(argv=None) -> int:
         if args.video:
             agent.reset()
             frames, _, _ = record(env, agent, args.seed, progress=not args.quiet)
-            save_gif(frames, Path(args.video), 15.0)
+            save_video(frames, Path(args.video), 15.0)
     finally:
         env.close()
     scores.update(task=args.task, epsilon=args.epsilon, checkpoint=str(args.checkpoint))
@@ -101,6 +119,7 @@ def main(argv=None) -> int:
           f"{args.seed + args.episodes - 1}): return {scores['mean_return']:.3f} +- "
           f"{scores['std_return']:.3f}, success {scores['success_rate']:.0%}, "
           f"mean length {scores['mean_length']:.0f} -> {out}")
+    print("  ended: " + ", ".join(f"{k} {v}" for k, v in scores["outcomes"].items() if v))
     return 0
 
 

@@ -14,6 +14,7 @@ COLUMNS = (
     "update", "wall_time", "env_steps", "episodes", "episode_return", "episode_length",
     "eval_return", "eval_length", "updates_per_s", "env_steps_per_s", "replay_ratio",
     "sampled_reward", "loss", "td_abs", "mean_q", "phase", "beta", "replay_size",
+    "phase_return",   # adaptive curriculum: the rolling mean that advances it (current phase only)
 )
 
 

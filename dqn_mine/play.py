@@ -1,4 +1,5 @@
-"""`python -m dqn_mine.play`: record one episode of a policy to a GIF (first-person view + map).
+"""`python -m dqn_mine.play`: record one episode of a policy to a GIF or MP4 (first-person view
+and map).
 
     python -m dqn_mine.play --policy expert --task rooms --num-rooms 4 --out runs/play/expert.gif
 
@@ -111,13 +112,46 @@ def save_gif(frames: list[np.ndarray], path: Path, fps: float) -> None:
                    duration=max(1, round(1000 / fps)), loop=0)
 
 
+def save_video(frames: list[np.ndarray], path: Path, fps: float) -> None:
+    """Frames with the map's legend below them, as a GIF or (with imageio-ffmpeg) an MP4."""
+    from dqn_mine.env.topdown import draw_legend
+
+    legend = draw_legend(frames[0].shape[1])
+    frames = [np.concatenate([f, legend]) for f in frames]
+    if path.suffix.lower() != ".mp4":
+        save_gif(frames, path, fps)
+        return
+    import imageio.v2 as imageio
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    # H.264 wants even sides: pad the last row/column with the background when odd.
+    h, w = frames[0].shape[:2]
+    pad = ((0, h % 2), (0, w % 2), (0, 0))
+    with imageio.get_writer(path, fps=fps, macro_block_size=1) as writer:
+        for f in frames:
+            writer.append_data(np.pad(f, pad, mode="edge"))
+
+
+def mp4_available() -> bool:
+    import importlib.util
+
+    return all(importlib.util.find_spec(m) is not None for m in ("imageio", "imageio_ffmpeg"))
+
+
 def check_output_settings(args: argparse.Namespace, out: Path) -> None:
     """What would only fail after a whole episode was recorded: fail before it instead."""
     check_episode_settings(args)
     if not args.fps > 0:
         raise ValueError(f"--fps must be positive, got {args.fps}")
-    if out.suffix.lower() != ".gif" or out.is_dir():
-        raise ValueError(f"--out must name a .gif file, got {out}")
+    check_video_path(out, "--out")
+
+
+def check_video_path(out: Path, flag: str) -> None:
+    if out.suffix.lower() not in (".gif", ".mp4") or out.is_dir():
+        raise ValueError(f"{flag} must name a .gif or .mp4 file, got {out}")
+    if out.suffix.lower() == ".mp4" and not mp4_available():
+        raise ValueError(f"{flag} .mp4 needs imageio with ffmpeg (pip install -e .[video]); "
+                         "a .gif needs nothing more")
 
 
 def add_episode_arguments(ap: argparse.ArgumentParser) -> None:
@@ -153,8 +187,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--checkpoint", default=None,
                     help="trained agent: a run folder or checkpoint.pt (its task is the default)")
     add_episode_arguments(ap)
-    ap.add_argument("--fps", type=float, default=15.0, help="frames per second of the GIF")
-    ap.add_argument("--out", default=None, help="GIF to write (default runs/play/<policy>.gif)")
+    ap.add_argument("--fps", type=float, default=15.0, help="frames per second of the video")
+    ap.add_argument("--out", default=None, help="video to write, .gif or .mp4 (MP4: much smaller, "
+                    "needs imageio-ffmpeg; default runs/play/<policy>.gif)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     return ap
 
@@ -176,7 +211,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     frames, total, steps = record(env, policy, args.seed, progress=not args.quiet)
     env.close()
-    save_gif(frames, out, args.fps)
+    save_video(frames, out, args.fps)
     print(f"{args.policy} on {args.task} (seed {args.seed}): "
           f"return {total:.1f} in {steps} steps -> {out}")
     return 0

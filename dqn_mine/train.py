@@ -46,6 +46,18 @@ def check_env_settings(cfg: Config) -> None:
             raise ConfigError(str(exc)) from None
 
 
+def check_saved_replay(cfg: Config) -> None:
+    """A resumed run's saved replay must fit the replay it will be read into."""
+    from dqn_mine.replay import snapshot
+    from dqn_mine.system.layout import replay_layout
+
+    if cfg.resume and cfg.save_replay and snapshot.exists(cfg.save_replay):
+        try:
+            snapshot.check(cfg.save_replay, replay_layout(cfg))
+        except snapshot.SnapshotError as exc:
+            raise ConfigError(str(exc)) from None
+
+
 def open_run(cfg: Config) -> Tuple[Config, Path, Optional[dict]]:
     """Validate everything that can fail, then create (or reuse) the run folder."""
     # parse_args already rebuilt a resumed run's config from its config.json.
@@ -53,6 +65,7 @@ def open_run(cfg: Config) -> Tuple[Config, Path, Optional[dict]]:
     resolve_device(cfg.device)
     check_env_settings(cfg)
     check_shared_memory(cfg)
+    check_saved_replay(cfg)
     cfg = cfg.with_run_dir()
     run_dir = Path(cfg.run_dir)
     if state is None:

@@ -2,6 +2,7 @@
 json round trip."""
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -129,6 +130,18 @@ def test_json_round_trip(tmp_path):
     c.to_json(tmp_path / "config.json")
     back = Config.from_json(tmp_path / "config.json")
     assert back == c and isinstance(back.rooms_schedule, tuple)
+
+
+def test_config_json_states_what_differs_from_the_preset(tmp_path):
+    c = parse_args(["--preset", "cpu", "--lr", "3e-4", "--replay-ratio", "0.05",
+                    "--actors", "2", "--run-dir", str(tmp_path)])
+    c.to_json(tmp_path / "config.json")
+    saved = json.loads((tmp_path / "config.json").read_text())
+    # --actors 2 is the cpu preset's own value, so it is no difference.
+    assert saved["preset"] == "cpu"
+    assert saved["differs_from_preset"] == {"lr": 3e-4, "replay_ratio": 0.05}
+    assert Config.from_json(tmp_path / "config.json") == c
+    assert parse_args([]).preset_differences() == {}
 
 
 @pytest.mark.parametrize("content,fragment", [

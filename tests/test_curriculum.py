@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from dqn_mine.config import parse_args
-from dqn_mine.system.actor import actor_specs, eval_env_kwargs, initial_phase
+from dqn_mine.system.actor import actor_specs, eval_env_kwargs, initial_phase, review_phase
 
 ROOT = Path(__file__).resolve().parents[1]
 FAST = ["--actors", "2", "--prefill", "100", "--replay-capacity", "4096", "--log-interval", "10",
@@ -36,6 +36,22 @@ def test_phases_advance_through_shared_state(tmp_path):
     phases = [int(r["phase"]) for r in rows]
     assert phases == sorted(phases, reverse=True), phases
     assert phases[-1] == 1 and phases[0] < 6
+
+
+def test_review_starts_a_share_of_episodes_in_easier_phases():
+    import numpy as np
+
+    cfg = parse_args(["--curriculum", "adaptive", "--curriculum-review", "0.3"])   # two-room
+    rng = np.random.default_rng(0)
+    drawn = np.array([review_phase(cfg, 2, rng) for _ in range(20_000)])
+    shares = [np.mean(drawn == p) for p in (1, 2, 3, 4)]
+    assert shares[0] == 0 and abs(shares[1] - 0.7) < 0.015
+    assert abs(shares[2] - 0.15) < 0.01 and abs(shares[3] - 0.15) < 0.01
+    assert {review_phase(cfg, 4, rng) for _ in range(100)} == {4}   # nothing easier to review
+    study = parse_args(["--curriculum", "adaptive"])
+    state = rng.bit_generator.state
+    assert {review_phase(study, 2, rng) for _ in range(100)} == {2}
+    assert rng.bit_generator.state == state, "without review no random number is drawn"
 
 
 def test_phase_holds_when_returns_stay_below_threshold(tmp_path):

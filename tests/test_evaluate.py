@@ -12,6 +12,7 @@ import pytest
 
 import dqn_mine
 from dqn_mine.env import MineRescueEnv
+from dqn_mine.evaluate import OUTCOMES, _outcome
 
 ROOT = Path(__file__).resolve().parents[1]
 FIELDS = {"episodes", "success_rate", "mean_return", "std_return", "mean_length", "task", "seed"}
@@ -42,6 +43,8 @@ def test_evaluate_writes_eval_json_and_is_reproducible(run_dir, tmp_path):
     assert 0.0 <= scores["success_rate"] <= 1.0
     assert 1 <= scores["mean_length"] <= 25
     assert "success" in res.stdout and "one-room, 3 episodes" in res.stdout
+    assert set(scores["outcomes"]) == set(OUTCOMES) and sum(scores["outcomes"].values()) == 3
+    assert scores["outcomes"]["delivered"] == round(3 * scores["success_rate"])
     again = evaluate(str(run_dir / "checkpoint.pt"), "--episodes", "3", "--max-steps", "25",
                      "--out", str(tmp_path / "again.json"), "--video", str(tmp_path / "e.gif"))
     assert again.returncode == 0, again.stderr
@@ -70,10 +73,26 @@ def test_load_agent_plays_an_episode_like_the_readme(run_dir):
     assert agent.history.dtype == np.int8 and len(agent.history) == 20
 
 
+def test_outcomes_say_what_the_agent_held_at_the_end():
+    from dqn_mine.env.entities import BOULDER
+
+    env = MineRescueEnv(task="two-room")
+    env.reset(seed=0)
+    boulder = next(e for e in env.entities if e.kind == BOULDER)
+    assert _outcome(env, True, True) == "delivered"
+    assert _outcome(env, False, False) == "kit never taken"
+    assert _outcome(env, False, True) == "kit dropped"
+    env.carrying = boulder
+    assert _outcome(env, False, True) == "holding a boulder"
+    env.carrying = env.kit
+    assert _outcome(env, False, True) == "holding the kit"
+    env.close()
+
+
 @pytest.mark.parametrize("argv,fragment", [
     (["--episodes", "0"], "--episodes must be at least 1"),
     (["--epsilon", "2"], "--epsilon must be in [0, 1]"),
-    (["--video", "x.mp4"], "--video must name a .gif"),
+    (["--video", "x.avi"], "--video must name a .gif or .mp4"),
 ])
 def test_bad_evaluate_flags_are_one_line(run_dir, argv, fragment):
     res = evaluate(str(run_dir), *argv)

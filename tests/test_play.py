@@ -31,6 +31,45 @@ def test_expert_gif_shows_first_person_and_map(tmp_path):
     assert frames > 10 and width > 2 * height   # first-person view and map side by side
 
 
+def test_video_frames_carry_the_map_legend(tmp_path):
+    import numpy as np
+
+    from dqn_mine.env import MineRescueEnv
+    from dqn_mine.env.topdown import draw_legend
+
+    env = MineRescueEnv(task="two-room", render_mode="rgb_array")
+    env.reset(seed=1)
+    view = env.render()
+    env.close()
+    out = tmp_path / "expert.gif"
+    res = play("--policy", "expert", "--task", "two-room", "--seed", "1", "--max-steps", "3",
+               "--out", str(out))
+    assert res.returncode == 0, res.stderr
+    with Image.open(out) as gif:
+        first = np.asarray(gif.convert("RGB"))
+    legend = draw_legend(view.shape[1])
+    assert first.shape == (view.shape[0] + legend.shape[0], view.shape[1], 3)
+    # the legend strip holds the symbols' colours: agent blue, kit red
+    assert (np.abs(legend.astype(int) - (40, 120, 255)).sum(-1) < 30).any()
+    assert (np.abs(legend.astype(int) - (225, 20, 20)).sum(-1) < 30).any()
+    assert np.abs(first[view.shape[0]:].astype(int) - legend).mean() < 8   # GIF palette error
+
+
+@pytest.mark.skipif(not __import__("dqn_mine.play").play.mp4_available(),
+                    reason="MP4 needs imageio-ffmpeg (pip install -e .[video])")
+def test_mp4_is_written_and_much_smaller_than_the_gif(tmp_path):
+    gif, mp4 = tmp_path / "a.gif", tmp_path / "a.mp4"
+    for out in (gif, mp4):
+        res = play("--policy", "random", "--task", "one-room", "--max-steps", "60",
+                   "--out", str(out))
+        assert res.returncode == 0, res.stderr
+    import imageio.v2 as imageio
+
+    with imageio.get_reader(mp4) as reader:
+        assert sum(1 for _ in reader) == 61
+    assert mp4.stat().st_size < gif.stat().st_size / 3
+
+
 def test_random_policy_respects_step_limit(tmp_path):
     out = tmp_path / "random.gif"
     res = play("--policy", "random", "--task", "one-room", "--max-steps", "25", "--out", str(out))

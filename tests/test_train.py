@@ -116,6 +116,40 @@ def test_serial_run_writes_the_run_folder(tmp_path):
     assert summary["return_episodes"] == min(summary["episodes"], 100)
 
 
+def test_saved_replay_is_read_back_on_resume_without_a_prefill(tmp_path):
+    from dqn_mine.system import checkpoint as ckpt
+
+    run_dir, replay_dir = tmp_path / "run", tmp_path / "replay"
+    res = run_train(*TINY, "--serial", "--updates", "40", "--run-dir", str(run_dir),
+                    "--save-replay", str(replay_dir))
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "saving the replay (" in res.stdout and "GB) to" in res.stdout
+    first = ckpt.load(run_dir)["counters"]
+    assert first["generation"] == 0 and (replay_dir / "frames.npy").exists()
+    res = run_train("--resume", str(run_dir), "--updates", "60")
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "transitions back from" in res.stdout and "no pre-fill" in res.stdout
+    again = ckpt.load(run_dir)["counters"]
+    # 20 updates stepped inline take a few dozen env steps; a new pre-fill alone would be 400
+    assert 0 < again["env_steps"] - first["env_steps"] < 400
+    assert again["generation"] == 1 and again["updates"] == 60
+    assert json.loads((run_dir / "config.json").read_text())["prefill"] == 200
+    # a replay of another size is refused in one line before anything starts
+    res = run_train("--resume", str(run_dir), "--updates", "80", "--replay-capacity", "2048")
+    assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
+    assert "replay layout" in res.stderr
+
+
+def test_resumed_actors_draw_new_seeds():
+    from dqn_mine.config import parse_args
+    from dqn_mine.system.actor import actor_specs
+
+    cfg = parse_args(["--actors", "3", "--eval-every", "100"])
+    seeds = [[s.seed for s in actor_specs(cfg, g)] for g in range(3)]
+    assert seeds[0] == [0, 1, 2, 7003]            # a new run keeps its documented seeds
+    assert len({s for gen in seeds for s in gen}) == 12
+
+
 def test_resume_takes_the_new_learning_rate(tmp_path):
     """Flags given on resume win, the optimiser's saved learning rate included."""
     from dqn_mine.system import checkpoint as ckpt

@@ -64,6 +64,30 @@ def draw_map(env, size: int = 256) -> np.ndarray:
     return np.asarray(img)
 
 
+LEGEND = (("agent", "agent"), (KIT, "kit"), (MINER, "miner"), (BOULDER, "boulder"),
+          ("door", "doorway"))
+
+
+def draw_legend(width: int, height: int = 16) -> np.ndarray:
+    """A strip naming the map's symbols (agent, kit, miner, boulder, doorway): uint8 (h, w, 3)."""
+    from PIL import Image, ImageDraw
+
+    img = Image.new("RGB", (int(width), int(height)), BACKGROUND)
+    draw = ImageDraw.Draw(img)
+    r, y = height * 0.3, height / 2
+    x = 6.0
+    for symbol, label in LEGEND:
+        if symbol == "agent":
+            draw.ellipse([x - r, y - r, x + r, y + r], fill=AGENT, outline=(255, 255, 255))
+        elif symbol == "door":
+            draw.line([(x - r, y), (x + r, y)], fill=DOOR, width=2)
+        else:
+            _draw_entity(draw, symbol, x, y, r)
+        draw.text((x + r + 3, y), label, fill=(230, 230, 230), anchor="lm")
+        x += r + 3 + draw.textlength(label) + 12
+    return np.asarray(img)
+
+
 def _draw_entity(draw, kind: str, x: float, y: float, r: float) -> None:
     box = [x - r, y - r, x + r, y + r]
     if kind == KIT:

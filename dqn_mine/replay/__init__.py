@@ -79,6 +79,7 @@ transition becomes visible once the actor has acted in s_{t+n}: its Q values giv
 term of the initial priority. ``storage.total_written()`` counts published env steps.
 """
 
+from dqn_mine.replay import snapshot
 from dqn_mine.replay.sampler import Batch, PrioritizedReplay, beta_at
 from dqn_mine.replay.storage import ReplayLayout, ReplayStorage
 from dqn_mine.replay.tree import MinTree, SumTree

@@ -232,6 +232,27 @@ class PrioritizedReplay:
         self._set(gone, np.zeros(gone.size))
         return stale
 
+    # -- saving and restoring ----------------------------------------------------------------
+    def state_dict(self) -> dict:
+        """Everything besides the storage that sampling depends on (queued updates applied)."""
+        self.apply_priority_updates()
+        return {"leaves": self.sum_tree.values.copy(), "seen": self._seen.copy(),
+                "alive_from": self._alive_from.copy(), "live": self._live,
+                "max_p": self._max_p, "rng": self.rng.bit_generator.state}
+
+    def load_state_dict(self, state: dict) -> None:
+        """Restore :meth:`state_dict` over a storage that holds the saved arrays again."""
+        leaves = np.asarray(state["leaves"], dtype=np.float64)
+        if leaves.shape != (self.storage.capacity,):
+            raise ValueError(f"saved priorities are for {leaves.size} slots, the replay has "
+                             f"{self.storage.capacity}")
+        self._pending.clear()
+        self._set(np.arange(leaves.size), leaves)
+        self._seen = np.array(state["seen"], dtype=np.int64)
+        self._alive_from = np.array(state["alive_from"], dtype=np.int64)
+        self._live, self._max_p = int(state["live"]), float(state["max_p"])
+        self.rng.bit_generator.state = state["rng"]
+
     def update_priorities(self, indices, td_abs, stamps=None) -> None:
         """Queue p = |delta| + eta for sampled slots. Applied at the next :meth:`ingest` or
         :meth:`sample`, in the thread that samples: so the learner may call this from its

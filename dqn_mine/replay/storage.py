@@ -35,7 +35,7 @@ from dqn_mine.system.shared import BlockSpec, SharedBlocks
 CURSOR, PUBLISHED, STEPS, EPISODES = 0, 1, 2, 3
 _COUNTER_COLS = 8
 
-_BLOCKS = ("frames", "carrying", "history", "ep_step", "action", "ret", "discount", "boot_off",
+BLOCK_NAMES = ("frames", "carrying", "history", "ep_step", "action", "ret", "discount", "boot_off",
            "boot", "priority", "counters")
 
 
@@ -102,7 +102,7 @@ class ReplayStorage:
     def __init__(self, layout: ReplayLayout, blocks: SharedBlocks):
         self.layout = layout
         self.blocks = blocks
-        for name in _BLOCKS:
+        for name in BLOCK_NAMES:
             setattr(self, name, blocks[name])
         self.capacity = layout.capacity
         self.stream_capacity = layout.stream_capacity

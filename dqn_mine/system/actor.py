@@ -132,6 +132,7 @@ class Actor:
         if not self.spec.follows_curriculum:
             return
         if self.cfg.curriculum == "adaptive":
+            phase = self.phases[j] = review_phase(self.cfg, phase, self.rng)
             self.envs[j].phase = phase
         elif self.cfg.curriculum == "schedule":
             self.envs[j].num_rooms = phase
@@ -300,8 +301,23 @@ def initial_phase(cfg: Config) -> int:
     return 0
 
 
-def actor_specs(cfg: Config) -> List[ActorSpec]:
-    """One spec per training actor (streams numbered actor-major), then the evaluation actor."""
+def review_phase(cfg: Config, phase: int, rng: np.random.Generator) -> int:
+    """The phase an episode starts in: with probability ``curriculum_review`` an easier one
+    already passed (uniformly), else ``phase``. Reviewed episodes keep the rewards of the skills
+    the current phase builds on flowing into the replay after a switch (without them the replay
+    soon holds only the new phase's failures and what was learned decays); the curriculum's
+    rolling mean counts only episodes of the current phase."""
+    easiest = initial_phase(cfg)
+    review = cfg.curriculum_review
+    if phase >= easiest or review == 0 or not rng.random() < review:
+        return phase
+    return int(rng.integers(phase + 1, easiest + 1))
+
+
+def actor_specs(cfg: Config, generation: int = 0) -> List[ActorSpec]:
+    """One spec per training actor (streams numbered actor-major), then the evaluation actor.
+
+    ``generation`` counts the starts of a run (0, then +1 per resume): each draws new seeds."""
     from dqn_mine.agent.learning import epsilon_for_actor
 
     e = cfg.envs_per_actor
@@ -312,12 +328,20 @@ def actor_specs(cfg: Config) -> List[ActorSpec]:
         eps = cfg.epsilon if cfg.epsilon_schedule == "fixed" else \
             tuple(epsilon_for_actor(i * e + j, cfg.actors * e) for j in range(e))
         specs.append(ActorSpec(index=i, streams=tuple(range(i * e, (i + 1) * e)), epsilon=eps,
-                               seed=cfg.seed * 7919 + i, env_kwargs=env_kwargs(cfg), num_envs=e))
+                               seed=actor_seed(cfg.seed, i, generation),
+                               env_kwargs=env_kwargs(cfg), num_envs=e))
     if cfg.eval_every:
         specs.append(ActorSpec(index=cfg.actors, streams=(), epsilon=cfg.eval_epsilon,
-                               seed=cfg.seed * 7919 + 7000 + cfg.actors,
+                               seed=actor_seed(cfg.seed, 7000 + cfg.actors, generation),
                                env_kwargs=eval_env_kwargs(cfg), follows_curriculum=False))
     return specs
+
+
+def actor_seed(seed: int, index: int, generation: int = 0) -> int:
+    """Seed of acting process ``index``; a resumed run (generation > 0) draws fresh ones."""
+    if generation == 0:
+        return seed * 7919 + index
+    return int(np.random.SeedSequence([seed, index, generation]).generate_state(1)[0])
 
 
 def eval_env_kwargs(cfg: Config) -> dict:

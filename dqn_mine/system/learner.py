@@ -81,7 +81,9 @@ class Learner:
     """The update loop's state: network updater, batch source, weight publishing."""
 
     def __init__(self, cfg: Config, storage, control, weights, device: str,
-                 threaded: bool = True):
+                 threaded: bool = True, replay_snapshot: Optional[str] = None):
+        """``replay_snapshot``: a saved replay to read back (before the prefetch thread starts
+        sampling); ``restored`` then holds its live transitions."""
         from dqn_mine.agent.learning import DQNUpdater, batch_to_device
         from dqn_mine.agent.network import DuelingQNetwork
         from dqn_mine.replay import PrioritizedReplay
@@ -94,6 +96,11 @@ class Learner:
                                                                       device))
         self.replay = PrioritizedReplay(storage, zeta=cfg.zeta if cfg.per else 0.0, eta=cfg.eta,
                                         seed=cfg.seed, init_priority=cfg.init_priority)
+        self.restored = 0
+        if replay_snapshot is not None:
+            from dqn_mine.replay import snapshot
+
+            self.restored = snapshot.load(replay_snapshot, storage, self.replay)
         self.updates = 0
         self.source = BatchSource(
             self.replay, cfg.batch_size, beta=self.beta,
@@ -131,6 +138,15 @@ class Learner:
             self.publish()
         stats["td_abs"] = float(np.mean(stats["td_abs"]))
         return stats
+
+    def save_replay(self, path: str) -> None:
+        """Write the replay to ``path`` (after :meth:`close`: nothing samples meanwhile)."""
+        from dqn_mine.replay import snapshot
+
+        size = snapshot.nbytes(self.replay.storage)
+        print(f"saving the replay ({len(self.replay):,} transitions, {size / 1e9:.2f} GB) to "
+              f"{path} ...", flush=True)
+        snapshot.save(path, self.replay.storage, self.replay)
 
     def close(self) -> None:
         self.source.close()

@@ -8,6 +8,7 @@ actor, writes a resumable checkpoint and unlinks every shared segment.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import multiprocessing as mp
@@ -21,6 +22,7 @@ from typing import List, Optional
 
 from dqn_mine.config import Config, learner_threads, resolve_device
 from dqn_mine.metrics import MetricsTable, RateMeter, Rolling, progress_postfix
+from dqn_mine.replay.snapshot import SnapshotError
 from dqn_mine.system import checkpoint as ckpt
 from dqn_mine.system.actor import (Actor, actor_main, actor_specs, first_error, initial_phase,
                                    learner_may_update, prefill_target)
@@ -79,13 +81,13 @@ class StopSignals:
 class ProcessActors:
     """Training actors as spawned processes (spawn: EGL contexts and CUDA do not survive fork)."""
 
-    def __init__(self, cfg: Config, handle: tuple):
+    def __init__(self, cfg: Config, handle: tuple, generation: int = 0):
         ctx = mp.get_context("spawn")
         # One pipe per actor for its error report: unlike a Queue it has no named semaphore to
         # leak when an actor is killed.
         self.errors = []
         self.procs: List[mp.Process] = []
-        for spec in actor_specs(cfg):
+        for spec in actor_specs(cfg, generation):
             receive, send = ctx.Pipe(duplex=False)
             p = ctx.Process(target=actor_main, args=(cfg, spec, handle, send),
                             name=f"dqn_mine-actor-{spec.index}", daemon=True)
@@ -128,9 +130,10 @@ class ProcessActors:
 class InlineActors:
     """Serial mode: the same actors, stepped in this process between learner updates."""
 
-    def __init__(self, cfg: Config, storage, control, weights):
+    def __init__(self, cfg: Config, storage, control, weights, generation: int = 0):
         self.cfg, self.control = cfg, control
-        self.actors = [Actor(cfg, spec, storage, control, weights) for spec in actor_specs(cfg)]
+        self.actors = [Actor(cfg, spec, storage, control, weights)
+                       for spec in actor_specs(cfg, generation)]
         self.next_eval = cfg.eval_every
 
     def advance(self) -> None:
@@ -159,9 +162,15 @@ class Run:
 
     def __init__(self, cfg: Config, run_dir: Path, state: Optional[dict] = None,
                  serial: bool = False, progress: bool = True):
-        self.cfg, self.run_dir, self.state = cfg, Path(run_dir), state
+        # cfg is what this process runs with (a restored replay sets its pre-fill to 0);
+        # saved_cfg is what checkpoints record.
+        self.cfg = self.saved_cfg = cfg
+        self.run_dir, self.state = Path(run_dir), state
         self.serial, self.progress = serial, progress
         counters = (state or {}).get("counters", {})
+        # Each start of a run (0, then one more per resume) gives the actors new seeds, so a
+        # resumed run does not replay the episodes it has already seen.
+        self.generation = int(counters.get("generation", -1)) + 1 if state else 0
         self.steps_offset = int(counters.get("env_steps", 0))
         self.episodes = int(counters.get("episodes", 0))
         self.time_offset = float(counters.get("wall_time", 0.0))
@@ -187,7 +196,8 @@ class Run:
 
     def counters(self) -> dict:
         return {"updates": self.learner.updates, "env_steps": self.env_steps(),
-                "episodes": self.episodes, "wall_time": self.wall_time(), "phase": self.phase}
+                "episodes": self.episodes, "wall_time": self.wall_time(), "phase": self.phase,
+                "generation": self.generation}
 
     def drain_episodes(self) -> None:
         for ep in self.control.drain_episodes():
@@ -241,12 +251,19 @@ class Run:
                 storage = ReplayStorage(replay_layout(self.cfg), blocks)
                 weights = WeightBroadcast(blocks)
                 self.learner = Learner(self.cfg, storage, self.control, weights, device,
-                                       threaded=not self.serial)
+                                       threaded=not self.serial,
+                                       replay_snapshot=self.replay_to_restore())
+                if self.learner.restored:
+                    print(f"read {self.learner.restored:,} transitions back from "
+                          f"{self.cfg.save_replay}: no pre-fill", flush=True)
+                    self.cfg = dataclasses.replace(self.cfg, prefill=0)
                 if self.state:
                     self.learner.load_state(self.state)
                 self.learner.publish()  # actors start from the learner's weights
-                self.actors = (InlineActors(self.cfg, storage, self.control, weights)
-                               if self.serial else ProcessActors(self.cfg, blocks.handle()))
+                self.actors = (
+                    InlineActors(self.cfg, storage, self.control, weights, self.generation)
+                    if self.serial else
+                    ProcessActors(self.cfg, blocks.handle(), self.generation))
                 self.metrics = MetricsTable(
                     self.run_dir / "metrics.csv",
                     self.run_dir / "tb" if self.cfg.tensorboard else None,
@@ -262,6 +279,9 @@ class Run:
                     code, self.reason = EXIT_INTERRUPTED, f"stopped by {self.signals.received}"
         except ActorFailure as exc:
             code, self.reason = EXIT_FAILED, str(exc)
+        except SnapshotError as exc:  # a damaged saved replay: keep it and the checkpoint
+            code, self.reason = EXIT_FAILED, str(exc)
+            self.keep_checkpoint = True
         except Exception as exc:  # the learner failed: keep the last good checkpoint
             traceback.print_exc()
             code, self.reason = EXIT_FAILED, f"learner failed: {type(exc).__name__}: {exc}"
@@ -270,6 +290,18 @@ class Run:
             self.shutdown()
             blocks.close()
         return self.summary(code)
+
+    def replay_to_restore(self) -> Optional[str]:
+        """The saved replay a resumed run reads back, if it has one."""
+        from dqn_mine.replay import snapshot
+
+        path = self.cfg.save_replay
+        if not (self.state and path):
+            return None
+        if not snapshot.exists(path):
+            print(f"no saved replay in {path}: pre-filling anew", flush=True)
+            return None
+        return path
 
     def _should_stop(self) -> bool:
         return self.signals.received is not None
@@ -338,7 +370,9 @@ class Run:
                "env_steps_per_s": step_rate.rate(steps),
                "replay_ratio": self.replay_ratio(), "phase": self.control.phase,
                "beta": self.learner.beta(),
-               "replay_size": len(self.learner.replay)}
+               "replay_size": len(self.learner.replay),
+               "phase_return": (self.curriculum_returns.mean if self.cfg.curriculum == "adaptive"
+                                else math.nan)}
         row.update({k: (sum(v) / len(v) if v else math.nan) for k, v in agg.items()})
         self.metrics.write(row)
         return row
@@ -350,7 +384,8 @@ class Run:
 
     # -- end ---------------------------------------------------------------------------------
     def save_checkpoint(self) -> None:
-        ckpt.save(self.run_dir, self.learner.updater.state_dict(), self.counters(), self.cfg)
+        ckpt.save(self.run_dir, self.learner.updater.state_dict(), self.counters(),
+                  self.saved_cfg)
 
     def shutdown(self) -> None:
         control = getattr(self, "control", None)
@@ -364,6 +399,8 @@ class Run:
             self.drain_episodes()
             if not self.keep_checkpoint:
                 self.save_checkpoint()
+                if self.cfg.save_replay:
+                    self.learner.save_replay(self.cfg.save_replay)
 
     def summary(self, code: int) -> Summary:
         learner = getattr(self, "learner", None)
