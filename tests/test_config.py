@@ -133,13 +133,13 @@ def test_json_round_trip(tmp_path):
 
 
 def test_config_json_states_what_differs_from_the_preset(tmp_path):
-    c = parse_args(["--preset", "cpu", "--lr", "3e-4", "--replay-ratio", "0.05",
+    c = parse_args(["--preset", "cpu", "--lr", "3e-4", "--replay-ratio", "0.1",
                     "--actors", "2", "--run-dir", str(tmp_path)])
     c.to_json(tmp_path / "config.json")
     saved = json.loads((tmp_path / "config.json").read_text())
     # --actors 2 is the cpu preset's own value, so it is no difference.
     assert saved["preset"] == "cpu"
-    assert saved["differs_from_preset"] == {"lr": 3e-4, "replay_ratio": 0.05}
+    assert saved["differs_from_preset"] == {"lr": 3e-4, "replay_ratio": 0.1}
     assert Config.from_json(tmp_path / "config.json") == c
     assert parse_args([]).preset_differences() == {}
 
