@@ -3,9 +3,9 @@
 Plays N episodes (seeds S, S+1, ...) greedily, or with ``--epsilon``, on the task the checkpoint
 was trained on unless ``--task`` and the other environment flags say otherwise; prints the mean
 and spread of the return, the success rate and the mean length, and writes ``eval.json`` next to
-the checkpoint (``--out`` elsewhere). ``--video PATH`` also records the first episode (GIF, or MP4 with imageio-ffmpeg). ``outcomes``
-counts how the episodes ended: delivered, still holding the kit or a boulder, the kit taken and
-dropped again, the kit never taken.
+the checkpoint (``--out`` elsewhere). ``--video PATH`` also records the first episode (GIF, or
+MP4 with imageio-ffmpeg). ``outcomes`` counts how the episodes ended: delivered, still holding
+the kit or a boulder, the kit taken and dropped again, the kit never taken.
 """
 
 from __future__ import annotations

@@ -1,12 +1,13 @@
 """Shared-memory prioritised replay (Ape-X style): ring storage, n-step writers, sum/min trees.
 
-Four small modules, each swappable (STYLE.md, TorchRL's split):
+Five small modules, each swappable (after TorchRL's split):
 
 =================  ===================================================================
 ``tree``           :class:`SumTree` (binary), :class:`MinTree` (32-ary): numpy, vectorised per batch
 ``storage``        :class:`ReplayLayout` (what to allocate), :class:`ReplayStorage` (the arrays)
 ``writer``         :class:`NStepWriter`: one per environment stream, lives in an actor process
 ``sampler``        :class:`PrioritizedReplay`, :class:`Batch`, :func:`beta_at`: the learner's side
+``snapshot``       the replay on disk (``--save-replay``): saved with the checkpoint, read on resume
 =================  ===================================================================
 
 Wiring (the runner owns the shared memory; see ``dqn_mine.system.shared``)::
@@ -86,4 +87,4 @@ from dqn_mine.replay.tree import MinTree, SumTree
 from dqn_mine.replay.writer import NStepWriter
 
 __all__ = ["Batch", "MinTree", "NStepWriter", "PrioritizedReplay", "ReplayLayout", "ReplayStorage",
-           "SumTree", "beta_at"]
+           "SumTree", "beta_at", "snapshot"]
