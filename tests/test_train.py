@@ -221,9 +221,12 @@ def test_parallel_run_with_two_actors(tmp_path):
     assert float(rows[-1]["env_steps_per_s"]) > 0
 
 
-def test_sigint_stops_cleanly_and_resume_continues(tmp_path):
+@pytest.mark.parametrize("save_replay", [False, True], ids=["plain", "save-replay"])
+def test_sigint_stops_cleanly_and_resume_continues(tmp_path, save_replay):
     run_dir = tmp_path / "int"
-    proc = subprocess.Popen(train_cmd(*TINY, "--updates", "100000", "--run-dir", str(run_dir)),
+    extra = ["--save-replay", str(tmp_path / "replay")] if save_replay else []
+    proc = subprocess.Popen(train_cmd(*TINY, "--updates", "100000", "--run-dir", str(run_dir),
+                                      *extra),
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         wait_for(lambda: (run_dir / "metrics.csv").exists() and len(metrics_rows(run_dir)) >= 2,
@@ -245,11 +248,17 @@ def test_sigint_stops_cleanly_and_resume_continues(tmp_path):
 
     # the last metrics row is the stop itself, not the last log interval before it
     assert int(ckpt.load(run_dir)["counters"]["updates"]) == stopped_at
+    stopped_size = int(metrics_rows(run_dir)[-1]["replay_size"])
     res = run_train("--resume", str(run_dir), "--updates", str(stopped_at + 40))
     assert res.returncode == 0, res.stderr[-3000:]
     updates = [int(r["update"]) for r in metrics_rows(run_dir)]
     assert updates[-1] == stopped_at + 40
     assert updates == sorted(updates)
+    assert ("saving the replay" in out) == save_replay
+    assert ("no pre-fill" in res.stdout) == save_replay
+    if save_replay:   # the resumed learner starts from the replay it stopped with
+        resumed = [r for r in metrics_rows(run_dir) if int(r["update"]) > stopped_at]
+        assert int(resumed[0]["replay_size"]) >= 0.95 * stopped_size
 
 
 def test_killed_actor_stops_the_run_with_an_error(tmp_path):
