@@ -166,11 +166,16 @@ class Config:
     def to_dict(self) -> Dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
 
-    def preset_differences(self) -> Dict[str, Any]:
-        """The settings in which this config differs from its preset (run folders aside)."""
+    def differences(self) -> Dict[str, Any]:
+        """The settings in which this config differs from its preset, in field order."""
         preset = Config(**{**PRESETS.get(self.preset, {}), "preset": self.preset})
         return {name: value for name, value in self.to_dict().items()
-                if name not in ("run_dir", "resume") and value != getattr(preset, name)}
+                if value != getattr(preset, name)}
+
+    def preset_differences(self) -> Dict[str, Any]:
+        """:meth:`differences` without the run folders (what config.json shows people)."""
+        return {name: value for name, value in self.differences().items()
+                if name not in ("run_dir", "resume")}
 
     def to_json(self, path) -> None:
         """All settings, plus (for people; ignored on load) those that differ from the preset."""
@@ -542,17 +547,13 @@ def resolve_learner_precision(name: str, device) -> str:
 
 def to_argv(cfg: Config) -> List[str]:
     """Flags that :func:`parse_args` turns back into ``cfg`` (the preset plus what differs)."""
-    base = Config(**{**PRESETS.get(cfg.preset, {}), "preset": cfg.preset})
     argv: List[str] = [] if cfg.preset == _field("preset").default else ["--preset", cfg.preset]
-    for f in dataclasses.fields(Config):
-        value = getattr(cfg, f.name)
-        if value == getattr(base, f.name):
-            continue
+    for name, value in cfg.differences().items():
         if isinstance(value, bool):
-            argv.append(f"--{'' if value else 'no-'}{_flag(f.name)}")
+            argv.append(f"--{'' if value else 'no-'}{_flag(name)}")
         elif isinstance(value, tuple):
-            argv += [f"--{_flag(f.name)}", *map(str, value)]
+            argv += [f"--{_flag(name)}", *map(str, value)]
         else:
             text = "none" if value is None else repr(value) if isinstance(value, float) else value
-            argv += [f"--{_flag(f.name)}", str(text)]
+            argv += [f"--{_flag(name)}", str(text)]
     return argv

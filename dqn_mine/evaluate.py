@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dqn_mine.env.entities import KIT
 from dqn_mine.play import (add_episode_arguments, check_episode_settings, check_video_path,
                            fill_env_settings, make_env, record, save_video)
 
@@ -56,7 +57,7 @@ def _outcome(env, terminated: bool, had_kit: bool) -> str:
     if terminated:
         return "delivered"
     if env.carrying is not None:
-        return "holding the kit" if env.carrying.kind == "kit" else "holding a boulder"
+        return "holding the kit" if env.carrying.kind == KIT else "holding a boulder"
     return "kit dropped" if had_kit else "kit never taken"
 
 

@@ -124,7 +124,7 @@ def save_video(frames: list[np.ndarray], path: Path, fps: float) -> None:
     import imageio.v2 as imageio
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    # H.264 wants even sides: pad the last row/column with the background when odd.
+    # H.264 wants even sides: repeat the last row/column when a side is odd.
     h, w = frames[0].shape[:2]
     pad = ((0, h % 2), (0, w % 2), (0, 0))
     with imageio.get_writer(path, fps=fps, macro_block_size=1) as writer:

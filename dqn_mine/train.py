@@ -50,10 +50,12 @@ def check_saved_replay(cfg: Config) -> None:
     """A resumed run's saved replay must fit the replay it will be read into."""
     from dqn_mine.replay import snapshot
     from dqn_mine.system.layout import replay_layout
+    from dqn_mine.system.runner import saved_replay
 
-    if cfg.resume and cfg.save_replay and snapshot.exists(cfg.save_replay):
+    path = saved_replay(cfg)
+    if path is not None:
         try:
-            snapshot.check(cfg.save_replay, replay_layout(cfg))
+            snapshot.check(path, replay_layout(cfg))
         except snapshot.SnapshotError as exc:
             raise ConfigError(str(exc)) from None
 

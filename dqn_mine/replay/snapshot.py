@@ -58,8 +58,9 @@ def save(path, storage: ReplayStorage, replay) -> Path:
     return path
 
 
-def check(path, layout: ReplayLayout) -> None:
-    """Raise SnapshotError unless ``path`` holds a snapshot written for ``layout``."""
+def check(path, layout: ReplayLayout) -> dict:
+    """Raise SnapshotError unless ``path`` holds a snapshot written for ``layout``; returns its
+    ``replay.json``."""
     info = _info(path)
     saved = info.get("layout")
     if saved != _layout_dict(layout):
@@ -68,12 +69,13 @@ def check(path, layout: ReplayLayout) -> None:
         raise SnapshotError(f"the replay saved in {path} was written for another replay layout "
                             f"(differs in {', '.join(diff)}); resume with the settings it was "
                             f"saved with, or move it away to pre-fill anew")
+    return info
 
 
 def load(path, storage: ReplayStorage, replay) -> int:
     """Fill ``storage`` and ``replay`` from the snapshot at ``path``; returns live transitions."""
     path = Path(path)
-    check(path, storage.layout)
+    info = check(path, storage.layout)
     try:
         for name in BLOCK_NAMES:
             saved = np.load(path / f"{name}.npy", mmap_mode="r")
@@ -84,7 +86,7 @@ def load(path, storage: ReplayStorage, replay) -> int:
             target[...] = saved
         with np.load(path / _SAMPLER) as z:
             state = {k: z[k] for k in ("leaves", "seen", "alive_from", "live", "max_p")}
-        state["rng"] = _info(path)["rng"]
+        state["rng"] = info["rng"]
         replay.load_state_dict(state)
     except SnapshotError:
         raise

@@ -35,8 +35,8 @@ from dqn_mine.system.shared import BlockSpec, SharedBlocks
 CURSOR, PUBLISHED, STEPS, EPISODES = 0, 1, 2, 3
 _COUNTER_COLS = 8
 
-BLOCK_NAMES = ("frames", "carrying", "history", "ep_step", "action", "ret", "discount", "boot_off",
-           "boot", "priority", "counters")
+BLOCK_NAMES = ("frames", "carrying", "history", "ep_step", "action", "ret", "discount",
+               "boot_off", "boot", "priority", "counters")
 
 
 @dataclass(frozen=True)

@@ -34,6 +34,15 @@ from dqn_mine.system.shared import SharedBlocks
 EXIT_OK, EXIT_FAILED, EXIT_INTERRUPTED = 0, 1, 130
 
 
+def saved_replay(cfg: Config) -> Optional[str]:
+    """``--save-replay``'s folder when a resumed run has a replay saved there, else None."""
+    from dqn_mine.replay import snapshot
+
+    if cfg.resume and cfg.save_replay and snapshot.exists(cfg.save_replay):
+        return cfg.save_replay
+    return None
+
+
 class ActorFailure(RuntimeError):
     """An actor process raised or died; the message names it and the cause."""
 
@@ -293,14 +302,9 @@ class Run:
 
     def replay_to_restore(self) -> Optional[str]:
         """The saved replay a resumed run reads back, if it has one."""
-        from dqn_mine.replay import snapshot
-
-        path = self.cfg.save_replay
-        if not (self.state and path):
-            return None
-        if not snapshot.exists(path):
-            print(f"no saved replay in {path}: pre-filling anew", flush=True)
-            return None
+        path = saved_replay(self.cfg)
+        if self.cfg.resume and self.cfg.save_replay and path is None:
+            print(f"no saved replay in {self.cfg.save_replay}: pre-filling anew", flush=True)
         return path
 
     def _should_stop(self) -> bool:
