@@ -82,6 +82,8 @@ class Config:
     exploration: str = _f("epsilon", "epsilon: a uniform random action with prob. epsilon; ez: "
                           "with prob. epsilon start a random action held for a zeta-distributed "
                           "duration (motions only)", EXPLORATIONS)
+    unstick: bool = _f(False, "a step after which the frame did not change is followed by a "
+                       "random action, as if epsilon had fired (training actors only)")
     ez_mu: float = _f(2.0, "ez exploration: durations n drawn with p(n) ~ n**-mu")
     ez_max_duration: int = _f(100, "ez exploration: longest duration of a held random action")
     prefill: int = _f(50_000, "environment steps per actor before the learner starts")
@@ -241,9 +243,11 @@ PRESETS: Dict[str, Dict[str, Any]] = {
     #   30% of the episodes review a passed phase, so rewards keep flowing after a switch (without
     #   it phase 2's return fell from 0.5 to 0.01 and the replay's rewards to 5e-4);
     # - a replay ratio of 0.05 updates per transition: the actors throttle to ~1,500 steps/s and
-    #   leave the learner its core (free-running, 0.007, phase 3 stayed below 0.4 for 35 min).
+    #   leave the learner its core (free-running, 0.007, phase 3 stayed below 0.4 for 35 min);
+    # - unstick: a random action after a step that left the frame unchanged (a greedy policy
+    #   facing a wall otherwise repeats itself); it doubles the episodes that reach room 2.
     "cpu": {
-        "task": "two-room", "actors": 2, "envs_per_actor": 16,
+        "task": "two-room", "actors": 2, "envs_per_actor": 16, "unstick": True,
         "epsilon_schedule": "apex", "exploration": "ez", "curriculum": "adaptive",
         "curriculum_review": 0.3, "replay_ratio": 0.05,
         "prefill": 20_000, "replay_capacity": 262_144, "updates": 300_000,

@@ -1,6 +1,9 @@
 """An actor in this process: it acts with the broadcast weights in the precision it was given."""
 
+import contextlib
 import dataclasses
+
+import numpy as np
 
 import torch
 
@@ -14,35 +17,42 @@ from dqn_mine.system.shared import SharedBlocks
 from dqn_mine.system.weights import WeightBroadcast
 
 
+@contextlib.contextmanager
+def in_process_actor(cfg, net, spec=None):
+    """An actor of ``cfg`` in this process, acting on ``net``'s published weights."""
+    with SharedBlocks.create(run_block_specs(cfg, net)) as blocks:
+        weights = WeightBroadcast(blocks)
+        weights.publish(net)
+        actor = Actor(cfg, spec or actor_specs(cfg)[0],
+                      ReplayStorage(replay_layout(cfg), blocks), Control(blocks), weights)
+        try:
+            yield actor
+        finally:
+            actor.close()
+
+
 def test_bfloat16_actor_acts_on_the_published_weights():
     cfg = dataclasses.replace(Config(**PRESETS["smoke"], preset="smoke"), actors=1,
                               envs_per_actor=2, replay_capacity=4096, eval_every=0,
                               actor_precision="bfloat16").validate()
     torch.manual_seed(0)
     learner_net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
-    with SharedBlocks.create(run_block_specs(cfg, learner_net)) as blocks:
-        weights = WeightBroadcast(blocks)
-        weights.publish(learner_net)
-        actor = Actor(cfg, actor_specs(cfg)[0], ReplayStorage(replay_layout(cfg), blocks),
-                      Control(blocks), weights)
-        try:
-            assert actor.version == 1
-            assert {p.dtype for p in actor.net.parameters()} == {torch.bfloat16}
-            for _ in range(30):
-                actor.step()
-            q = actor.q_values(actor.stacks, actor.histories, actor.carrying)      # [E, A]
-            with torch.inference_mode():
-                expected = learner_net(torch.from_numpy(actor.stacks),
-                                       torch.from_numpy(actor.histories),
-                                       torch.from_numpy(actor.carrying)).numpy()
-            assert q.dtype == expected.dtype and q.shape == (2, 6)
-            assert abs(q - expected).max() < 0.02 * abs(expected).max()
-            assert actor.steps == 60
-            for writer in actor.writers:                   # publish what close() would
-                writer.flush()
-            assert actor.writers[0].storage.total_written() == 60
-        finally:
-            actor.close()
+    with in_process_actor(cfg, learner_net) as actor:
+        assert actor.version == 1
+        assert {p.dtype for p in actor.net.parameters()} == {torch.bfloat16}
+        for _ in range(30):
+            actor.step()
+        q = actor.q_values(actor.stacks, actor.histories, actor.carrying)      # [E, A]
+        with torch.inference_mode():
+            expected = learner_net(torch.from_numpy(actor.stacks),
+                                   torch.from_numpy(actor.histories),
+                                   torch.from_numpy(actor.carrying)).numpy()
+        assert q.dtype == expected.dtype and q.shape == (2, 6)
+        assert abs(q - expected).max() < 0.02 * abs(expected).max()
+        assert actor.steps == 60
+        for writer in actor.writers:                   # publish what close() would
+            writer.flush()
+        assert actor.writers[0].storage.total_written() == 60
 
 
 def test_ez_actor_holds_random_motions_with_one_rate_per_env():
@@ -56,19 +66,46 @@ def test_ez_actor_holds_random_motions_with_one_rate_per_env():
     rates = [eps for spec in specs for eps in spec.epsilon]
     assert rates == [epsilon_for_actor(k, 6) for k in range(6)]
     net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
-    with SharedBlocks.create(run_block_specs(cfg, net)) as blocks:
-        weights = WeightBroadcast(blocks)
-        weights.publish(net)
-        actor = Actor(cfg, specs[0], ReplayStorage(replay_layout(cfg), blocks),
-                      Control(blocks), weights)
-        try:
-            assert actor.explorer.durations
-            assert list(actor.explorer.epsilon) == rates[:3]
-            held = 0
-            for _ in range(200):
-                actor.step()
-                held += int((actor.explorer.left > 0).sum())
-            assert held > 0, "env 0 (epsilon 0.4) must start runs that last several steps"
-            assert actor.steps == 600
-        finally:
-            actor.close()
+    with in_process_actor(cfg, net, specs[0]) as actor:
+        assert actor.explorer.durations
+        assert list(actor.explorer.epsilon) == rates[:3]
+        held = 0
+        for _ in range(200):
+            actor.step()
+            held += int((actor.explorer.left > 0).sum())
+        assert held > 0, "env 0 (epsilon 0.4) must start runs that last several steps"
+        assert actor.steps == 600
+
+
+def _noop_network(cfg) -> DuelingQNetwork:
+    """A network whose greedy action is the no-op everywhere: the frame never changes."""
+    net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
+    with torch.no_grad():
+        for p in net.parameters():
+            p.zero_()
+        net.advantage[-1].bias[5] = 1.0
+    return net
+
+
+def _actions_taken(cfg, steps: int):
+    with in_process_actor(cfg, _noop_network(cfg)) as actor:
+        actor.explorer.epsilon[:] = 0.0
+        taken, stuck = [], []
+        for _ in range(steps):
+            actor.step()
+            taken.append(actor.histories[:, -1].copy())    # the action each env just took
+            stuck.append(actor.stuck.copy())
+        return np.array(taken), np.array(stuck)            # [T, E]
+
+
+def test_unstick_turns_a_stuck_greedy_policy_random_only_while_stuck():
+    cfg = dataclasses.replace(Config(**PRESETS["smoke"], preset="smoke"), actors=1,
+                              envs_per_actor=2, replay_capacity=4096, eval_every=0)
+    taken, stuck = _actions_taken(cfg.validate(), 40)
+    assert (taken == 5).all() and stuck.all(), "without unstick a no-op policy never moves"
+    taken, stuck = _actions_taken(dataclasses.replace(cfg, unstick=True).validate(), 40)
+    # a no-op leaves the frame as it was, so the step after it is random; a random step that
+    # moved or turned gives the greedy no-op back
+    assert (taken[1:][stuck[:-1]] != 5).mean() > 0.6     # uniform: 5 of 6 are not the no-op
+    assert (taken[1:][~stuck[:-1]] == 5).all()
+    assert 0.2 < stuck.mean() < 0.9

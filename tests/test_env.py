@@ -346,6 +346,50 @@ def test_exchange_swaps_held_and_faced_items(envs):
     assert kit in env.world_entities() and boulder not in env.world_entities()
 
 
+def test_exchange_from_where_the_agent_stops_at_the_kit(envs):
+    """Carrying the boulder, the agent walks into the kit and takes it: the boulder goes down
+    beyond the kit's place (it would overlap the agent at it), clear of the agent."""
+    env = get(envs, dict(task="two-room"))
+    env.reset(seed=6)
+    kit = env.kit
+    boulder = next(e for e in env.entities if e.kind == BOULDER)
+    room = env.layout.rooms[env.room_of(kit)]
+    kit.x, kit.z = room.center             # in the open, where there is room for the boulder
+    assert env.item_fits(kit, kit.x, kit.z)
+    env.carrying = boulder
+    env._entities_changed()
+    stand_before(env, kit, gap=0.3)
+    kx, kz = kit.x, kit.z
+    for _ in range(3):                     # walk into the kit: blocked where the bodies touch
+        env.step(FORWARD)
+    assert math.hypot(kx - env.agent_x, kz - env.agent_z) < AGENT_RADIUS + boulder.radius
+    _, _, _, _, info = env.step(INTERACT)
+    assert env.carrying is kit and info["carrying_kit"]
+    gap = math.hypot(boulder.x - env.agent_x, boulder.z - env.agent_z)
+    assert gap >= AGENT_RADIUS + boulder.radius, "the boulder is put down clear of the agent"
+    # on the line from the agent through the kit's old place, no further than needed
+    ux, uz = (kx - env.agent_x), (kz - env.agent_z)
+    cross = ux * (boulder.z - env.agent_z) - uz * (boulder.x - env.agent_x)
+    assert abs(cross) < 1e-6 and gap == pytest.approx(AGENT_RADIUS + boulder.radius + 0.1)
+    assert env.item_fits(boulder, boulder.x, boulder.z)
+
+
+def test_exchange_refused_when_the_held_item_has_no_room(envs):
+    env = get(envs, dict(task="two-room"))
+    env.reset(seed=6)
+    kit = env.kit
+    boulder = next(e for e in env.entities if e.kind == BOULDER)
+    room = env.layout.rooms[env.room_of(kit)]
+    # the kit against a wall, the agent facing it from the room: no room there for the boulder
+    kit.x, kit.z = room.x1 - kit.radius - 0.05, (room.z0 + room.z1) / 2
+    env.carrying = boulder
+    env._entities_changed()
+    stand_before(env, kit, gap=0.05, angle=0.0)
+    _, _, _, _, info = env.step(INTERACT)
+    assert env.carrying is boulder and not info["carrying_kit"]
+    assert (kit.x, kit.z) == (room.x1 - kit.radius - 0.05, (room.z0 + room.z1) / 2)
+
+
 def test_clearing_the_doorway_opens_it(envs):
     env = get(envs, dict(task="two-room"))
     env.reset(seed=7)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from dqn_mine.agent.explore import HELD_ACTIONS, Explorer, zeta_durations
-from dqn_mine.bench.explore import POLICIES, SUBGOALS, measure
+from dqn_mine.bench.explore import POLICIES, SUBGOALS, fresh_network_inputs, measure
 from dqn_mine.env import MineRescueEnv
 from dqn_mine.env.mine import AGENT_RADIUS, FORWARD_STEP, HEADINGS
 
@@ -64,6 +64,33 @@ def test_without_durations_nothing_is_held():
     ex = Explorer(1.0, 100, np.random.default_rng(4), durations=False)
     ex.act(np.zeros(100, int))
     assert (ex.left == 0).all()
+
+
+def test_unstick_replaces_the_greedy_action_only_where_the_frame_did_not_change():
+    greedy = np.full(6000, 2)
+    stuck = np.zeros(6000, bool)
+    stuck[:3000] = True
+    ex = Explorer(0.0, 6000, np.random.default_rng(5), unstick=True)
+    out = ex.act(greedy, stuck)
+    assert (out[3000:] == 2).all(), "epsilon 0 and not stuck: greedy"
+    counts = np.bincount(out[:3000], minlength=6)
+    assert counts.min() > 400 and counts.max() < 620     # uniform over 6 actions: 500 each
+    off = Explorer(0.0, 6000, np.random.default_rng(5), unstick=False)
+    assert (off.act(greedy, stuck) == 2).all(), "without unstick the stuck mask is ignored"
+
+
+def test_unstick_leaves_the_other_envs_random_stream_alone():
+    greedy = np.zeros(50, int)
+    stuck = np.zeros(50, bool)
+    stuck[::7] = True
+    plain = Explorer(0.3, 50, np.random.default_rng(6), durations=True)
+    unstuck = Explorer(0.3, 50, np.random.default_rng(6), durations=True, unstick=True)
+    a, b = plain.act(greedy, stuck), unstuck.act(greedy, stuck)
+    fired = a != greedy                     # envs where epsilon started a random action anyway
+    same = ~stuck | fired
+    assert (a[same] == b[same]).all()
+    assert (unstuck.left[stuck & ~fired & (b < HELD_ACTIONS)] > 0).any(), \
+        "an unstick action is held like an epsilon one under ez"
 
 
 # --- delivery reach (hand-placed scenes) -------------------------------------------------------
@@ -212,3 +239,14 @@ def test_a_kit_held_from_the_start_counts_as_picked_up_only_when_taken_again():
     else:
         raise AssertionError("no seed let the agent drop the kit")
     env.close()
+
+
+def test_a_fresh_network_acts_on_its_action_history_not_on_what_it_sees():
+    """Why a fresh network gets stuck: with PyTorch's default init the conv features are ~0.02
+    against one-hot history inputs of 1, so swapping the image almost never changes the greedy
+    action, swapping the history often does."""
+    rows = fresh_network_inputs(nets=3, episodes=2, steps=30)
+    image = np.mean([r["image"] for r in rows])
+    history = np.mean([r["history"] for r in rows])
+    assert image < 0.05 and history > image + 0.1
+    assert all(1 / 6 <= r["top action"] <= 1 for r in rows)

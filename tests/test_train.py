@@ -317,6 +317,20 @@ def test_smoke_preset_learns_one_room(tmp_path):
     assert final >= 0.8, f"smoke preset ended at mean return {final:.2f}"
 
 
+def test_cpu_preset_finds_rewards_on_two_room_within_its_prefill(tmp_path):
+    """The cpu preset's exploration (its curriculum's first phase, Ape-X rates, ez, unstick)
+    records rewarded two-room episodes within one pre-fill of 20,000 steps per actor."""
+    run_dir = tmp_path / "cpu"
+    res = run_train("--preset", "cpu", "--serial", "--updates", "40", "--replay-capacity",
+                    "65536", "--eval-every", "0", "--log-interval", "20", "--no-progress",
+                    "--run-dir", str(run_dir), timeout=600)
+    assert res.returncode == 0, res.stderr[-3000:]
+    rows = metrics_rows(run_dir)
+    assert int(rows[-1]["env_steps"]) < 45_000
+    assert int(rows[-1]["episodes"]) >= 32
+    assert max(float(r["episode_return"]) for r in rows) > 0.05
+
+
 def test_tensorboard_event_files_hold_every_metrics_row(tmp_path):
     pytest.importorskip("tensorboard")
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator

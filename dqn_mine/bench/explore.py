@@ -16,7 +16,8 @@ Policies:
 - ``ez-uniform``: uniform random actions held for zeta-distributed durations (mu 2, up to 100);
 - ``fresh eps=0.01``: a freshly initialised network acting epsilon-greedily (the study's actors);
 - ``fresh Ape-X``: the same network, episodes spread over the Ape-X epsilons of 7 actors;
-- ``fresh ez eps=0.01`` etc.: the same with temporally extended random actions.
+- ``fresh ez eps=0.01`` etc.: the same with temporally extended random actions;
+- ``... unstick``: the same, with a random action after every step that left the frame unchanged.
 
 ``python -m dqn_mine.bench.explore --tasks two-room --policies uniform --quick`` measures a part.
 
@@ -47,6 +48,7 @@ class Policy:
     network: bool            # greedy actions from a fresh network (else: no greedy part)
     epsilon: str             # "1", "0.01" or "apex" (the Ape-X epsilons of 7 actors)
     durations: bool          # ez-greedy: random actions held for zeta-distributed durations
+    unstick: bool = False    # a random action after every step that left the frame unchanged
 
 
 POLICIES = {p.name: p for p in [
@@ -56,6 +58,8 @@ POLICIES = {p.name: p for p in [
     Policy("fresh Ape-X", True, "apex", False),
     Policy("fresh ez eps=0.01", True, "0.01", True),
     Policy("fresh ez Ape-X", True, "apex", True),
+    Policy("fresh eps=0.01 unstick", True, "0.01", False, True),
+    Policy("fresh ez Ape-X unstick", True, "apex", True, True),
 ]}
 
 
@@ -124,10 +128,12 @@ def _measure(env_kwargs: dict, policy: Policy, episodes: int, num_envs: int, see
     net = DuelingQNetwork(**(network_kwargs or {})).eval() if policy.network else None
     h = net.history_len if net is not None else 0
     envs = [MineRescueEnv(**env_kwargs) for _ in range(num_envs)]
-    explorer = Explorer(_epsilons(policy, num_envs), num_envs, rng, durations=policy.durations)
+    explorer = Explorer(_epsilons(policy, num_envs), num_envs, rng, durations=policy.durations,
+                        unstick=policy.unstick)
     obs = np.zeros((num_envs, *envs[0].observation_space.shape), np.uint8)   # [E, 3, H, W]
     hist = np.full((num_envs, h), -1, np.int8)                              # [E, h]
     carrying = np.zeros(num_envs, np.float32)                                # [E]
+    stuck = np.zeros(num_envs, bool)                                         # [E]
     trackers: List[Optional[_Tracker]] = [None] * num_envs
     started = 0
 
@@ -135,7 +141,7 @@ def _measure(env_kwargs: dict, policy: Policy, episodes: int, num_envs: int, see
         nonlocal started
         obs[j], info = envs[j].reset(seed=seed * 100_003 + started)
         started += 1
-        hist[j], carrying[j] = -1, float(info["carrying"])
+        hist[j], carrying[j], stuck[j] = -1, float(info["carrying"]), False
         explorer.reset(j)
         trackers[j] = _Tracker(envs[j], info)
 
@@ -153,10 +159,11 @@ def _measure(env_kwargs: dict, policy: Policy, episodes: int, num_envs: int, see
             greedy = q.argmax(1).numpy()
         else:
             greedy = np.zeros(num_envs, np.int64)
-        actions = explorer.act(greedy)
+        actions = explorer.act(greedy, stuck)
         for j in np.flatnonzero(active):
             o, r, term, trunc, info = envs[j].step(int(actions[j]))
             steps += 1
+            stuck[j] = np.array_equal(o, obs[j])
             obs[j], carrying[j] = o, float(info["carrying"])
             if h:
                 hist[j, :-1], hist[j, -1] = hist[j, 1:], actions[j]
@@ -198,6 +205,55 @@ def table(rows: List[tuple]) -> List[str]:
     return lines
 
 
+def fresh_network_inputs(nets: int = 5, episodes: int = 8, steps: int = 40,
+                         seed: int = 0) -> List[Dict[str, float]]:
+    """What a freshly initialised network's greedy action depends on, for ``nets`` inits.
+
+    Frames come from random play in ``two-room``; each is paired with a random action history.
+    For each init: the share of greedy actions that change when the frames are shuffled against
+    the histories (the image swapped, the history kept) and when the histories are shuffled (the
+    history swapped), and the share of the most frequent greedy action.
+    """
+    import torch
+
+    from dqn_mine.agent.network import DuelingQNetwork
+    from dqn_mine.env import MineRescueEnv
+
+    rng = np.random.default_rng(seed)
+    env = MineRescueEnv(task="two-room")
+    frames = []
+    for ep in range(episodes):
+        env.reset(seed=seed * 100_003 + ep)
+        for _ in range(steps):
+            frames.append(env.step(int(rng.integers(4)))[0])
+    env.close()
+    obs = torch.from_numpy(np.stack(frames))                                  # [N, 3, H, W]
+    n = len(frames)
+    hist = torch.from_numpy(rng.integers(0, 6, (n, 20)).astype(np.int8))     # [N, h]
+    carrying = torch.zeros(n)
+    out = []
+    for k in range(nets):
+        torch.manual_seed(seed + k)
+        net = DuelingQNetwork().eval()
+        with torch.inference_mode():
+            greedy = net(obs, hist, carrying).argmax(1)
+            other_image = net(obs[torch.randperm(n)], hist, carrying).argmax(1)
+            other_history = net(obs, hist[torch.randperm(n)], carrying).argmax(1)
+        out.append({"image": (greedy != other_image).float().mean().item(),
+                    "history": (greedy != other_history).float().mean().item(),
+                    "top action": np.bincount(greedy.numpy(), minlength=6).max() / n})
+    return out
+
+
+def inputs_table(rows: List[Dict[str, float]]) -> List[str]:
+    lines = ["| network init | greedy action changes with the image | with the history | "
+             "most frequent greedy action |", "|---|---:|---:|---:|"]
+    for k, r in enumerate(rows):
+        lines.append(f"| seed {k} | {100 * r['image']:.0f}% | {100 * r['history']:.0f}% | "
+                     f"{100 * r['top action']:.0f}% |")
+    return lines
+
+
 def run(quick: bool = False, policies=None, tasks=None) -> str:
     episodes = 64 if quick else 300
     rows = []
@@ -207,9 +263,13 @@ def run(quick: bool = False, policies=None, tasks=None) -> str:
             print(f"  {task:16s} {name:20s} " + " ".join(f"{r[k]:.3f}" for k in SUBGOALS) +
                   f"  {r['steps/s']:.0f} steps/s", flush=True)
             rows.append((task, name, r))
+    inputs = inputs_table(fresh_network_inputs(nets=2 if quick else 5))
     return "\n".join(["## Exploration\n",
                       f"Share of {episodes} episodes per task and policy that reach each sub-goal "
-                      "(`python -m dqn_mine.bench --only explore`).\n", *table(rows), ""])
+                      "(`python -m dqn_mine.bench --only explore`).\n", *table(rows), "",
+                      "What a fresh network's greedy action depends on (320 two-room frames, "
+                      "each with a random action history; the share of greedy actions that "
+                      "change when the frames or the histories are shuffled):\n", *inputs, ""])
 
 
 def main(argv=None) -> None:

@@ -65,10 +65,13 @@ class Actor:
         self.updates_at_start = control.updates
         self.torch = torch
         self.rng = np.random.default_rng(spec.seed)
-        # The evaluation actor measures the greedy policy: plain epsilon, never held actions.
+        # The evaluation actor measures the greedy policy: plain epsilon, never held actions,
+        # never unstuck.
+        training = bool(spec.streams)
         self.explorer = Explorer(spec.epsilon, spec.num_envs, self.rng,
-                                 durations=cfg.exploration == "ez" and bool(spec.streams),
-                                 mu=cfg.ez_mu, max_duration=cfg.ez_max_duration)
+                                 durations=cfg.exploration == "ez" and training,
+                                 mu=cfg.ez_mu, max_duration=cfg.ez_max_duration,
+                                 unstick=cfg.unstick and training)
         self.net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
         # Pulled float32 weights are converted on load (WeightBroadcast copies into the tensors).
         self.net.to(resolve_actor_precision(cfg.actor_precision, spec.num_envs)).eval()
@@ -91,6 +94,7 @@ class Actor:
         f, (c, h, w) = cfg.frame_stack, self.envs[0].observation_space.shape
         self.stacks = np.zeros((len(self.envs), f * c, h, w), dtype=np.uint8)  # [E, 3f, H, W]
         self.carrying = np.zeros(len(self.envs), dtype=np.float32)
+        self.stuck = np.zeros(len(self.envs), dtype=bool)   # frame unchanged by the last step
         for j, env in enumerate(self.envs):
             self.apply_curriculum(j)
             obs, info = env.reset(seed=spec.seed * 1000 + j)
@@ -103,6 +107,7 @@ class Actor:
         self.carrying[j] = float(info["carrying"])
         self.returns[j], self.lengths[j] = 0.0, 0
         self.histories[j] = -1
+        self.stuck[j] = False
         self.explorer.reset(j)
         if self.writers:
             self.writers[j].begin_episode(obs, bool(info["carrying"]))
@@ -154,7 +159,7 @@ class Actor:
     def step(self) -> int:
         """One step of every environment; returns the number of env steps taken."""
         q = self.q_values(self.stacks, self.histories, self.carrying)  # [E, A]
-        actions = self.explorer.act(q.argmax(axis=1))
+        actions = self.explorer.act(q.argmax(axis=1), self.stuck)
         for j, env in enumerate(self.envs):
             self._step_env(j, env, int(actions[j]), q[j])
         self.steps += len(self.envs)
@@ -166,6 +171,7 @@ class Actor:
         obs, reward, terminated, truncated, info = env.step(action)
         self.returns[j] += reward
         self.lengths[j] += 1
+        self.stuck[j] = np.array_equal(obs, self.stacks[j, -obs.shape[0]:])
         self._push_frame(j, obs)
         self.carrying[j] = float(info["carrying"])
         if self.cfg.history_len:
