@@ -56,11 +56,10 @@ class Explorer:
 
     def act(self, greedy: np.ndarray, stuck: np.ndarray | None = None) -> np.ndarray:
         actions = np.asarray(greedy, dtype=np.int64).copy()
-        free = self.left == 0          # no random action running
-        self._start(free & (self.rng.random(len(actions)) < self.epsilon))
+        self._start((self.left == 0) & (self.rng.random(len(actions)) < self.epsilon))
         if self.unstick and stuck is not None:
             # drawn after epsilon's: the other envs get the draws they would get without unstick
-            self._start(free & stuck & (self.left == 0))
+            self._start(stuck & (self.left == 0))
         running = self.left > 0
         actions[running] = self.action[running]
         self.left[running] -= 1

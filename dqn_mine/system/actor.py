@@ -171,7 +171,8 @@ class Actor:
         obs, reward, terminated, truncated, info = env.step(action)
         self.returns[j] += reward
         self.lengths[j] += 1
-        self.stuck[j] = np.array_equal(obs, self.stacks[j, -obs.shape[0]:])
+        if self.explorer.unstick:
+            self.stuck[j] = np.array_equal(obs, self.stacks[j, -obs.shape[0]:])
         self._push_frame(j, obs)
         self.carrying[j] = float(info["carrying"])
         if self.cfg.history_len:
