@@ -165,8 +165,7 @@ class Expert:
         env = self.env
         far = all(math.hypot(x - d.center[0], z - d.center[1]) >= ASIDE_CLEARANCE
                   for d in env.layout.doors)
-        return (far and env.item_fits(item, x, z)
-                and not env.layout.crosses_wall(env.agent_x, env.agent_z, x, z))
+        return far and env.can_put_down(item, x, z)
 
     def _aside_spot(self) -> tuple[float, float]:
         """The free cell of this room nearest to the agent that lies far from every doorway:

@@ -225,6 +225,13 @@ class MineEnv(gym.Env):
                     return False
         return True
 
+    def can_put_down(self, item: Entity, x: float, z: float,
+                     ignore: Entity | None = None) -> bool:
+        """True when the agent could put ``item`` down at (x, z): it fits there and no wall lies
+        between the agent and the spot (drop, exchange, and the expert's choice of a spot)."""
+        return (self.item_fits(item, x, z, ignore=ignore)
+                and not self.layout.crosses_wall(self.agent_x, self.agent_z, x, z))
+
     def facing(self) -> Entity | None:
         """The entity action 4 acts on: the nearest one in reach in front, not behind a wall."""
         c, s = _COS[self.heading], _SIN[self.heading]
@@ -281,8 +288,7 @@ class MineEnv(gym.Env):
             c, s = _COS[self.heading], _SIN[self.heading]
             ahead = AGENT_RADIUS + held.radius + DROP_GAP
             x, z = self.agent_x + ahead * c, self.agent_z + ahead * s
-            if (not self.item_fits(held, x, z)
-                    or self.layout.crosses_wall(self.agent_x, self.agent_z, x, z)):
+            if not self.can_put_down(held, x, z):
                 return False
             held.x, held.z, held.yaw = x, z, 2 * math.pi * self.heading / HEADINGS
             self.carrying = None
@@ -305,10 +311,7 @@ class MineEnv(gym.Env):
         x, z = target.x, target.z
         if dist < clear:
             x, z = self.agent_x + dx * clear / dist, self.agent_z + dz * clear / dist
-        if (not self.item_fits(held, x, z, ignore=target)
-                or self.layout.crosses_wall(self.agent_x, self.agent_z, x, z)):
-            return None
-        return x, z
+        return (x, z) if self.can_put_down(held, x, z, ignore=target) else None
 
     def _carrying_kit(self) -> bool:
         return self.carrying is not None and self.carrying.kind == KIT
