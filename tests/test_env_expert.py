@@ -86,12 +86,15 @@ def test_phase_starts_as_specified(task, phase, kit_room, miner_room):
         doors = len(env.layout.doors)
         assert info["agent_room"] == want.agent_room
         assert info["miner_room"] == miner_room
-        assert info["carrying_kit"] == want.carrying_kit == info["carrying"]
+        assert info["carrying_kit"] == want.carrying_kit
+        assert info["carrying"] == (want.carrying_kit or want.holding_boulder)
         if not want.carrying_kit:
             assert info["kit_room"] == kit_room
-        # Boulders moved aside leave their doorways open: the chain's first k doors are clear.
-        assert open_doorways(env) == [True] * want.boulders_aside + \
-            [False] * (doors - want.boulders_aside)
+        # Boulders moved aside or held leave their doorways open: the chain's first k are clear.
+        cleared = want.boulders_aside + want.holding_boulder
+        assert open_doorways(env) == [True] * cleared + [False] * (doors - cleared)
+        if want.holding_boulder:
+            assert env.carrying.kind == "boulder"
     env.close()
 
 
