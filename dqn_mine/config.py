@@ -64,7 +64,7 @@ class Config:
                         "randomisation)", PLACEMENTS)
     visual_randomisation: bool = _f(False, "draw light, wall colour and field of view anew each "
                                     "episode (training actors only)")
-    curriculum: str = _f("none", "adaptive: phases 6->1 (three-room) or 5->1 (two-room), one "
+    curriculum: str = _f("none", "adaptive: phases 6->1 (three-room and two-room), one "
                          "harder when the rolling return passes the threshold; schedule: room "
                          "counts by share of updates", CURRICULA)
     curriculum_threshold: float = _f(0.6, "rolling mean return that advances a curriculum phase")

@@ -164,7 +164,7 @@ def add_episode_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--room-size", type=float, default=None, help="side of each room in units")
     ap.add_argument("--placement", default=None, help="fixed or any-room (domain randomisation)")
     ap.add_argument("--phase", type=int, default=None,
-                    help="curriculum phase: 1..6 of three-room, 1..5 of two-room")
+                    help="curriculum phase: 1..6 of three-room and of two-room")
     ap.add_argument("--visual-randomisation", action="store_true",
                     help="random light, wall colour and field of view")
     ap.add_argument("--seed", type=int, default=0, help="episode seed (the first one)")

@@ -43,11 +43,11 @@ def test_review_starts_a_share_of_episodes_in_easier_phases():
 
     cfg = parse_args(["--curriculum", "adaptive", "--curriculum-review", "0.3"])   # two-room
     rng = np.random.default_rng(0)
-    drawn = np.array([review_phase(cfg, 3, rng) for _ in range(20_000)])
-    shares = [np.mean(drawn == p) for p in (1, 2, 3, 4, 5)]
-    assert shares[0] == shares[1] == 0 and abs(shares[2] - 0.7) < 0.015
-    assert abs(shares[3] - 0.15) < 0.01 and abs(shares[4] - 0.15) < 0.01
-    assert {review_phase(cfg, 5, rng) for _ in range(100)} == {5}   # nothing easier to review
+    drawn = np.array([review_phase(cfg, 4, rng) for _ in range(20_000)])
+    shares = [np.mean(drawn == p) for p in (1, 2, 3, 4, 5, 6)]
+    assert shares[0] == shares[1] == shares[2] == 0 and abs(shares[3] - 0.7) < 0.015
+    assert abs(shares[4] - 0.15) < 0.01 and abs(shares[5] - 0.15) < 0.01
+    assert {review_phase(cfg, 6, rng) for _ in range(100)} == {6}   # nothing easier to review
     study = parse_args(["--curriculum", "adaptive"])
     state = rng.bit_generator.state
     assert {review_phase(study, 2, rng) for _ in range(100)} == {2}
@@ -99,7 +99,7 @@ def test_evaluation_actor_runs_the_full_target_task():
                            "--eval-every", "1000"])
     assert initial_phase(adaptive) == 6 and not actor_specs(adaptive)[-1].follows_curriculum
     two = parse_args(["--curriculum", "adaptive", "--eval-every", "1000"])   # two-room
-    assert initial_phase(two) == 5 and eval_env_kwargs(two)["task"] == "two-room"
+    assert initial_phase(two) == 6 and eval_env_kwargs(two)["task"] == "two-room"
     rooms = parse_args(["--task", "rooms", "--curriculum", "schedule", "--rooms-schedule", "3", "4",
                         "5", "--eval-every", "1000"])
     assert eval_env_kwargs(rooms)["num_rooms"] == 5 and initial_phase(rooms) == 3

@@ -467,7 +467,7 @@ def test_truncation_at_the_step_limit():
     (dict(task="three-room", phase=0), "phase"),
     (dict(task="three-room", phase=7), "phase"),
     (dict(task="one-room", phase=2), "three-room"),
-    (dict(task="two-room", phase=6), "phase"),
+    (dict(task="two-room", phase=7), "phase"),
     (dict(task="three-room", phase=2, placement="any-room"), "fixed"),
     (dict(render_mode="human"), "render_mode"),
 ])

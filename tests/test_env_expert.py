@@ -95,6 +95,9 @@ def test_phase_starts_as_specified(task, phase, kit_room, miner_room):
         assert open_doorways(env) == [True] * cleared + [False] * (doors - cleared)
         if want.holding_boulder:
             assert env.carrying.kind == "boulder"
+        if want.near_boulder:   # a few steps from the boulder that blocks the next doorway
+            boulder = [e for e in env.world_entities() if e.kind == BOULDER][cleared]
+            assert 2.0 <= math.dist((env.agent_x, env.agent_z), (boulder.x, boulder.z)) <= 4.0
     env.close()
 
 

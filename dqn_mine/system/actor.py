@@ -297,7 +297,7 @@ def attach_all(cfg: Config, handle: tuple):
 
 
 def initial_phase(cfg: Config) -> int:
-    """Start of the curriculum: the easiest phase (6 of three-room, 5 of two-room), or the first
+    """Start of the curriculum: the easiest phase (6 of three-room and of two-room), or the first
     room count."""
     if cfg.curriculum == "adaptive":
         from dqn_mine.env.tasks import TASK_PHASES
