@@ -1,3 +1,5 @@
+# typing.get_type_hints evaluates these annotations, and `X | None` fails there on Python 3.9.
+# ruff: noqa: UP007, UP045
 """The run configuration: one frozen dataclass, the command line generated from it, json I/O.
 
 Every field carries a one-line ``help`` that becomes its ``--flag`` help. Precedence of values:
@@ -18,7 +20,7 @@ import time
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Optional
 
 try:  # the environment package owns the list of tasks once it exists
     from dqn_mine.env import TASKS
@@ -71,7 +73,7 @@ class Config:
     curriculum_window: int = _f(50, "episodes in the rolling mean that advances the curriculum")
     curriculum_review: float = _f(0.0, "adaptive curriculum: share of episodes that start in an "
                                   "easier phase already passed (0 = the study's rule)")
-    rooms_schedule: Tuple[int, ...] = _f((3, 4, 5), "room counts of the schedule curriculum, each "
+    rooms_schedule: tuple[int, ...] = _f((3, 4, 5), "room counts of the schedule curriculum, each "
                                          "for an equal share of the updates")
     # -- actors ------------------------------------------------------------------------------
     actors: int = _f(7, "number of actor processes")
@@ -150,13 +152,13 @@ class Config:
                            "RUN_DIR/tb (needs the tensorboard package: pip install -e .[tb])")
 
     # -- checks ------------------------------------------------------------------------------
-    def validate(self) -> "Config":
+    def validate(self) -> Config:
         """Raise :class:`ConfigError` (one line) for an impossible configuration; return self."""
         for problem in _problems(self):
             raise ConfigError(problem)
         return self
 
-    def with_run_dir(self, now: Optional[float] = None) -> "Config":
+    def with_run_dir(self, now: Optional[float] = None) -> Config:
         """This config with ``run_dir`` filled in (``runs/<task>__<preset>__<seed>__<time>``)."""
         if self.run_dir is not None:
             return self
@@ -165,16 +167,16 @@ class Config:
             self, run_dir=f"runs/{self.task}__{self.preset}__{self.seed}__{stamp}")
 
     # -- json --------------------------------------------------------------------------------
-    def to_dict(self) -> Dict[str, Any]:
+    def to_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
 
-    def differences(self) -> Dict[str, Any]:
+    def differences(self) -> dict[str, Any]:
         """The settings in which this config differs from its preset, in field order."""
         preset = Config(**{**PRESETS.get(self.preset, {}), "preset": self.preset})
         return {name: value for name, value in self.to_dict().items()
                 if value != getattr(preset, name)}
 
-    def preset_differences(self) -> Dict[str, Any]:
+    def preset_differences(self) -> dict[str, Any]:
         """:meth:`differences` without the run folders (what config.json shows people)."""
         return {name: value for name, value in self.differences().items()
                 if name not in ("run_dir", "resume")}
@@ -185,7 +187,7 @@ class Config:
         Path(path).write_text(json.dumps(data, indent=2) + "\n")
 
     @classmethod
-    def from_dict(cls, data: Dict[str, Any], where: str = "config") -> "Config":
+    def from_dict(cls, data: dict[str, Any], where: str = "config") -> Config:
         if not isinstance(data, dict):
             raise ConfigError(f"{where}: expected a json object")
         data = {k: v for k, v in data.items() if k != DIFFERENCES_KEY}
@@ -204,7 +206,7 @@ class Config:
         return cls(**values)
 
     @classmethod
-    def from_json(cls, path) -> "Config":
+    def from_json(cls, path) -> Config:
         """Load a saved config; a missing, unreadable or corrupt file raises ConfigError."""
         path = Path(path)
         try:
@@ -217,7 +219,7 @@ class Config:
 
 
 # Named starting points; explicit flags override them.
-PRESETS: Dict[str, Dict[str, Any]] = {
+PRESETS: dict[str, dict[str, Any]] = {
     "paper": {},  # the study's configuration on two-room
     # Learns a small one-room on 2 CPU cores in minutes: high exploration from the Ape-X schedule
     # (actor 0 at 0.4; a random network alone barely moves), a faster learning rate and target
@@ -259,7 +261,7 @@ PRESETS: Dict[str, Dict[str, Any]] = {
 
 # -- validation --------------------------------------------------------------------------------
 
-def _problems(c: Config) -> List[str]:
+def _problems(c: Config) -> list[str]:
     """Every impossible setting, as one-line messages (first one is raised)."""
     import importlib.util
 
@@ -348,7 +350,7 @@ class _Parser(argparse.ArgumentParser):
         raise ConfigError(message)
 
 
-def _hints() -> Dict[str, Any]:
+def _hints() -> dict[str, Any]:
     return typing.get_type_hints(Config)
 
 
@@ -361,7 +363,7 @@ def _flag(name: str) -> str:
 
 
 def _is_tuple(hint) -> bool:
-    return typing.get_origin(hint) in (tuple, Tuple)
+    return typing.get_origin(hint) is tuple
 
 
 def _fits(value, hint) -> bool:
@@ -420,7 +422,7 @@ def build_parser() -> argparse.ArgumentParser:
             group = parser.add_argument_group(HELP_SECTIONS[f.name])
         hint, meta = hints[f.name], f.metadata
         helptext = f"{meta['help']} (default: {_show(f.default)})"
-        kwargs: Dict[str, Any] = {"help": helptext, "dest": f.name}
+        kwargs: dict[str, Any] = {"help": helptext, "dest": f.name}
         if hint is bool:
             kwargs["action"] = argparse.BooleanOptionalAction
         elif _is_tuple(hint):
@@ -437,7 +439,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def parse_args(argv: Optional[List[str]] = None) -> Config:
+def parse_args(argv: Optional[list[str]] = None) -> Config:
     """Command line -> validated Config (``run_dir`` still None unless given or resumed).
 
     Raises ConfigError (one line) for bad flags, an unknown preset or a missing/corrupt resume.
@@ -549,9 +551,9 @@ def resolve_learner_precision(name: str, device) -> str:
     return "bfloat16" if native_bf16() else "float32"
 
 
-def to_argv(cfg: Config) -> List[str]:
+def to_argv(cfg: Config) -> list[str]:
     """Flags that :func:`parse_args` turns back into ``cfg`` (the preset plus what differs)."""
-    argv: List[str] = [] if cfg.preset == _field("preset").default else ["--preset", cfg.preset]
+    argv: list[str] = [] if cfg.preset == _field("preset").default else ["--preset", cfg.preset]
     for name, value in cfg.differences().items():
         if isinstance(value, bool):
             argv.append(f"--{'' if value else 'no-'}{_flag(name)}")

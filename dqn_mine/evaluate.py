@@ -18,8 +18,15 @@ from pathlib import Path
 import numpy as np
 
 from dqn_mine.env.entities import KIT
-from dqn_mine.play import (add_episode_arguments, check_episode_settings, check_video_path,
-                           fill_env_settings, make_env, record, save_video)
+from dqn_mine.play import (
+    add_episode_arguments,
+    check_episode_settings,
+    check_video_path,
+    fill_env_settings,
+    make_env,
+    record,
+    save_video,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

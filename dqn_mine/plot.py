@@ -12,12 +12,11 @@ import argparse
 import math
 import sys
 from pathlib import Path
-from typing import List, Optional
 
 from dqn_mine.metrics import read_metrics
 
 
-def load_run(run_dir: Path) -> List[dict]:
+def load_run(run_dir: Path) -> list[dict]:
     """The metrics rows of a run folder; a one-line ValueError when there are none."""
     path = Path(run_dir) / "metrics.csv"
     if not path.is_file():
@@ -28,11 +27,11 @@ def load_run(run_dir: Path) -> List[dict]:
     return rows
 
 
-def column(rows: List[dict], name: str) -> List[float]:
+def column(rows: list[dict], name: str) -> list[float]:
     return [r.get(name, math.nan) for r in rows]
 
 
-def has_values(rows: List[dict], name: str) -> bool:
+def has_values(rows: list[dict], name: str) -> bool:
     return any(not math.isnan(v) for v in column(rows, name))
 
 
@@ -77,7 +76,7 @@ def plot_runs(runs: dict, out: Path) -> Path:
     return out
 
 
-def main(argv: Optional[List[str]] = None) -> int:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m dqn_mine.plot",
                                  description=__doc__.split("\n\n")[0])
     ap.add_argument("runs", nargs="+", help="run folders (each with metrics.csv)")

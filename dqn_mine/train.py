@@ -15,8 +15,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Optional, Sequence, Tuple
 
 from dqn_mine.config import Config, ConfigError, parse_args, resolve_device
 from dqn_mine.system import checkpoint as ckpt
@@ -60,7 +60,7 @@ def check_saved_replay(cfg: Config) -> None:
             raise ConfigError(str(exc)) from None
 
 
-def open_run(cfg: Config) -> Tuple[Config, Path, Optional[dict]]:
+def open_run(cfg: Config) -> tuple[Config, Path, dict | None]:
     """Validate everything that can fail, then create (or reuse) the run folder."""
     # parse_args already rebuilt a resumed run's config from its config.json.
     state = ckpt.load(cfg.resume) if cfg.resume else None
@@ -91,7 +91,7 @@ def report(summary) -> None:
         print(f"  resume with: python -m {PROG} --resume {s.run_dir}")
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     from dqn_mine.system.runner import Run
 
     try:

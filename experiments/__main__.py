@@ -17,8 +17,8 @@ from __future__ import annotations
 import argparse
 import shlex
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import List, Optional, Sequence
 
 from dqn_mine.config import ConfigError
 from experiments.grid import SCALES, grid_names, load_grid
@@ -66,7 +66,7 @@ def resolve_scale(scale: str) -> str:
     return "paper" if torch.cuda.is_available() else "quick"
 
 
-def seeds_of(args, grid) -> List[int]:
+def seeds_of(args, grid) -> list[int]:
     if args.seed_list is not None:
         return list(dict.fromkeys(args.seed_list))   # a seed given twice is one run
     n = grid.default_seeds(args.scale) if args.seeds is None else args.seeds
@@ -85,7 +85,7 @@ def cmd_list() -> int:
     return 0
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
         if args.command == "list":

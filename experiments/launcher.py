@@ -28,9 +28,9 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
 
 from dqn_mine.config import Config, ConfigError
 from experiments.grid import RunSpec
@@ -56,7 +56,7 @@ def run_state(spec: RunSpec) -> str:
     return "resume" if (d / "checkpoint.pt").exists() else "restart"
 
 
-def _read_json(path: Path) -> Optional[dict]:
+def _read_json(path: Path) -> dict | None:
     try:
         return json.loads(path.read_text())
     except (OSError, ValueError):
@@ -77,7 +77,7 @@ def _differs(spec: RunSpec) -> str:
     return f"{spec.run_dir} holds another configuration ({shown}); use another OUT or delete it"
 
 
-def train_command(spec: RunSpec, state: str) -> List[str]:
+def train_command(spec: RunSpec, state: str) -> list[str]:
     base = [sys.executable, "-m", "dqn_mine.train"]
     if state == "resume":
         return base + ["--resume", str(spec.run_dir), "--updates", str(spec.cfg.updates),
@@ -89,7 +89,7 @@ def train_command(spec: RunSpec, state: str) -> List[str]:
 class Outcome:
     spec: RunSpec
     state: str  # what the launcher found (see run_state)
-    exit_code: Optional[int] = None  # None: not run (complete, conflict, or never started)
+    exit_code: int | None = None  # None: not run (complete, conflict, or never started)
     seconds: float = 0.0
 
 
@@ -107,13 +107,13 @@ class Sweep:
     """Runs ``specs`` (``jobs`` at a time, at most ``cores`` busy processes unless a single run
     alone needs more) and returns one :class:`Outcome` per spec."""
 
-    def __init__(self, specs: Sequence[RunSpec], jobs: int = 1, cores: Optional[int] = None,
+    def __init__(self, specs: Sequence[RunSpec], jobs: int = 1, cores: int | None = None,
                  progress: bool = True, echo=print):
         self.specs, self.jobs = list(specs), max(1, jobs)
         self.cores = cores or os.cpu_count() or 1
         self.progress, self.echo = progress, echo
-        self.stop_signal: Optional[int] = None
-        self.running: List[_Running] = []
+        self.stop_signal: int | None = None
+        self.running: list[_Running] = []
 
     # -- signals -----------------------------------------------------------------------------
     def _on_signal(self, signum, frame) -> None:
@@ -125,10 +125,10 @@ class Sweep:
             self.echo(f"\n{signal.Signals(signum).name}: stopping the running trainers "
                       "(they write a checkpoint); run the same command again to continue")
 
-    def run(self) -> List[Outcome]:
+    def run(self) -> list[Outcome]:
         from tqdm import tqdm
 
-        outcomes: Dict[int, Outcome] = {}
+        outcomes: dict[int, Outcome] = {}
         pending = []
         for i, spec in enumerate(self.specs):
             state = run_state(spec)

@@ -4,7 +4,6 @@ import contextlib
 import dataclasses
 
 import numpy as np
-
 import torch
 
 from dqn_mine.agent.network import DuelingQNetwork

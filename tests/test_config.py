@@ -8,8 +8,17 @@ import numpy as np
 import pytest
 import torch
 
-from dqn_mine.config import (PRESETS, Config, ConfigError, build_parser, native_bf16,
-                             parse_args, resolve_actor_precision, resolve_device, to_argv)
+from dqn_mine.config import (
+    PRESETS,
+    Config,
+    ConfigError,
+    build_parser,
+    native_bf16,
+    parse_args,
+    resolve_actor_precision,
+    resolve_device,
+    to_argv,
+)
 
 
 def test_defaults_are_the_studys():

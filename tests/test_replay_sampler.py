@@ -3,8 +3,14 @@
 import numpy as np
 import pytest
 
-from dqn_mine.replay import Batch, NStepWriter, PrioritizedReplay, ReplayLayout, ReplayStorage, \
-    beta_at
+from dqn_mine.replay import (
+    Batch,
+    NStepWriter,
+    PrioritizedReplay,
+    ReplayLayout,
+    ReplayStorage,
+    beta_at,
+)
 from dqn_mine.replay.storage import CURSOR, PUBLISHED
 from dqn_mine.system.shared import SharedBlocks
 

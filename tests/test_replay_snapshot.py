@@ -17,7 +17,7 @@ def fill(storage, steps, seed=0):
     for stream in range(storage.layout.num_streams):
         w = NStepWriter(storage, stream, flush_every=8)
         w.begin_episode(rng.integers(0, 255, (3, 4, 5), np.uint8), 0.0)
-        for t in range(steps):
+        for _t in range(steps):
             end = rng.random() < 0.05
             w.append(rng.normal(size=6).astype(np.float32), int(rng.integers(6)),
                      float(end), rng.integers(0, 255, (3, 4, 5), np.uint8),

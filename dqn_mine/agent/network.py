@@ -15,7 +15,6 @@
 from __future__ import annotations
 
 import copy
-from typing import Tuple
 
 import torch
 import torch.nn.functional as F
@@ -41,7 +40,7 @@ class DuelingQNetwork(nn.Module):
     """Dueling DQN over a (stacked) camera frame, a one-hot action history and a carrying flag."""
 
     def __init__(self, frame_stack: int = 1, history_len: int = 20, num_actions: int = NUM_ACTIONS,
-                 frame_shape: Tuple[int, int, int] = FRAME_SHAPE):
+                 frame_shape: tuple[int, int, int] = FRAME_SHAPE):
         super().__init__()
         self.frame_stack = frame_stack
         self.history_len = history_len

@@ -8,8 +8,6 @@ none) and the carrying flag.
 
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 import torch
 
@@ -29,11 +27,11 @@ class AgentPolicy:
         self.frame_stack, self.history_len = frame_stack, history_len
         self.epsilon = epsilon
         self.rng = np.random.default_rng(seed)
-        self.stack: Optional[np.ndarray] = None           # uint8 [3f, H, W]
+        self.stack: np.ndarray | None = None           # uint8 [3f, H, W]
         self.history = np.full(history_len, -1, dtype=np.int8)
 
     @classmethod
-    def from_checkpoint(cls, path, epsilon: float = 0.0, seed: int = 0) -> "AgentPolicy":
+    def from_checkpoint(cls, path, epsilon: float = 0.0, seed: int = 0) -> AgentPolicy:
         """Raises CheckpointError (one line) for a missing or corrupt checkpoint."""
         from dqn_mine.system import checkpoint as ckpt
 
@@ -54,7 +52,7 @@ class AgentPolicy:
     def __call__(self, env, obs: np.ndarray, info: dict) -> int:
         return self.predict(obs, info)
 
-    def predict(self, obs: np.ndarray, info: Optional[dict] = None) -> int:
+    def predict(self, obs: np.ndarray, info: dict | None = None) -> int:
         """The action for ``obs`` (uint8 [3, H, W]); greedy unless ``epsilon`` > 0."""
         carrying = float(bool((info or {}).get("carrying", False)))
         if self.stack is None:

@@ -23,8 +23,18 @@ from collections import deque
 
 from dqn_mine.env.entities import KIT, Entity
 from dqn_mine.env.layout import Door
-from dqn_mine.env.mine import (AGENT_RADIUS, ASIDE_CLEARANCE, BACKWARD, DROP_GAP, FORWARD,
-                               HEADINGS, INTERACT, TURN_LEFT, TURN_RIGHT, MineEnv)
+from dqn_mine.env.mine import (
+    AGENT_RADIUS,
+    ASIDE_CLEARANCE,
+    BACKWARD,
+    DROP_GAP,
+    FORWARD,
+    HEADINGS,
+    INTERACT,
+    TURN_LEFT,
+    TURN_RIGHT,
+    MineEnv,
+)
 
 CELL = 0.5              # grid resolution inside a room
 MARGIN = 0.2            # extra clearance the planner keeps from walls and entities
@@ -244,13 +254,13 @@ class Expert:
     def _turn_to(self, want: int) -> int:
         return TURN_RIGHT if (want - self.env.heading) % HEADINGS <= HEADINGS // 2 else TURN_LEFT
 
-    def _grid(self, room: int) -> "_Grid":
+    def _grid(self, room: int) -> _Grid:
         key = ("grid", room, self.env.version)
         if key not in self._fields:
             self._fields[key] = _Grid(self.env, room)
         return self._fields[key]
 
-    def _field(self, grid: "_Grid", goal: tuple[float, float]) -> dict:
+    def _field(self, grid: _Grid, goal: tuple[float, float]) -> dict:
         key = ("field", grid.room, self.env.version, goal)
         if key not in self._fields:
             if len(self._fields) > 64:

@@ -72,24 +72,24 @@ TWO_ROOM_PHASES = {
 TASK_PHASES = {"two-room": TWO_ROOM_PHASES, "three-room": PHASES}
 
 
-def _one_room(env: "MineRescueEnv") -> None:
+def _one_room(env: MineRescueEnv) -> None:
     env._build_layout(1, chain=False)
     env._place(MINER, 0)
     env._place(KIT, 0)
     env._place_agent(0)
 
 
-def _two_room(env: "MineRescueEnv") -> None:
+def _two_room(env: MineRescueEnv) -> None:
     env._build_layout(2, chain=False)
     _populate(env, env._block_doorways(), kit_room=1, miner_room=1)
 
 
-def _three_room(env: "MineRescueEnv") -> None:
+def _three_room(env: MineRescueEnv) -> None:
     env._build_layout(3, chain=True)
     _populate(env, env._block_doorways(), kit_room=2, miner_room=0)
 
 
-def _populate(env: "MineRescueEnv", boulders, kit_room: int, miner_room: int) -> None:
+def _populate(env: MineRescueEnv, boulders, kit_room: int, miner_room: int) -> None:
     """Place miner, kit and agent: the full task (agent in room 0), or a curriculum phase."""
     if env.phase is None or env.phase == 1:
         agent, kit, miner = env._start_rooms(fixed=(0, kit_room, miner_room))
@@ -109,7 +109,7 @@ def _populate(env: "MineRescueEnv", boulders, kit_room: int, miner_room: int) ->
     env._place_agent(agent)
 
 
-def _rooms(env: "MineRescueEnv") -> None:
+def _rooms(env: MineRescueEnv) -> None:
     n = env.num_rooms
     env._build_layout(n, chain=False)
     env._block_doorways()
@@ -124,7 +124,7 @@ class Task:
     name: str
     rooms: int | None          # None: set by num_rooms
     step_limit: int
-    generate: Callable[["MineRescueEnv"], None]
+    generate: Callable[[MineRescueEnv], None]
 
 
 TASKS = {t.name: t for t in [

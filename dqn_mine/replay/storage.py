@@ -25,7 +25,6 @@ counters       [S, 8] i64           per stream: cursor, published, env steps, ep
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List, Optional, Tuple
 
 import numpy as np
 
@@ -45,7 +44,7 @@ class ReplayLayout:
 
     num_streams: int                               # one ring per environment stream
     stream_capacity: int                           # M: slots per stream
-    frame_shape: Tuple[int, ...] = (3, 44, 76)     # one RGB frame, channels first
+    frame_shape: tuple[int, ...] = (3, 44, 76)     # one RGB frame, channels first
     history_len: int = 20                          # h: actions kept as the action history
     n_step: int = 6                                # n of the n-step return
     gamma: float = 0.99                            # discount per step
@@ -62,7 +61,7 @@ class ReplayLayout:
                              f"n_step {self.n_step} and frame_stack {self.frame_stack}")
 
     @classmethod
-    def from_capacity(cls, capacity: int, num_streams: int, **kw) -> "ReplayLayout":
+    def from_capacity(cls, capacity: int, num_streams: int, **kw) -> ReplayLayout:
         """Split ``capacity`` transitions evenly over ``num_streams`` rings (rounding down)."""
         return cls(num_streams=num_streams, stream_capacity=capacity // num_streams, **kw)
 
@@ -74,7 +73,7 @@ class ReplayLayout:
     def frame_nbytes(self) -> int:
         return int(np.prod(self.frame_shape))
 
-    def block_specs(self) -> List[BlockSpec]:
+    def block_specs(self) -> list[BlockSpec]:
         """Every shared array of the replay (``SharedBlocks.create`` allocates them)."""
         c, h = self.capacity, self.history_len
         return [
@@ -122,7 +121,7 @@ class ReplayStorage:
         """Slot of each transition's bootstrap frame s_{t+k} (same stream, ``boot_off`` later)."""
         return self.boot.take(slots).astype(np.int64)
 
-    def gather_obs(self, slots: np.ndarray, out: Optional[np.ndarray] = None) -> np.ndarray:
+    def gather_obs(self, slots: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Observations of ``slots``: uint8 [B, 3f, H, W], frames before the episode start zero."""
         f, fs = self.layout.frame_stack, self.layout.frame_shape
         b = slots.shape[0]

@@ -23,8 +23,6 @@ as fast.
 
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 
 
@@ -50,7 +48,7 @@ class SumTree:
         self._pairs = self.tree.reshape(-1, 2)         # _pairs[i] = children of node i
         self._top = min(self._TOP, self.depth)
         self._whole = max(self._top, min(self._WHOLE, self.depth))
-        self._cum: Optional[np.ndarray] = None         # [2^top + 1] exclusive prefix sums
+        self._cum: np.ndarray | None = None         # [2^top + 1] exclusive prefix sums
         self._total = 0.0
 
     @property

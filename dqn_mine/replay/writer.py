@@ -12,8 +12,6 @@ the initial priority) or the episode has ended there.
 
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 
 from dqn_mine.replay.storage import CURSOR, EPISODES, PUBLISHED, STEPS, ReplayStorage
@@ -52,7 +50,7 @@ class NStepWriter:
         self._rews: list = []
         self._hist0 = np.full(self.h, -1, dtype=np.int8)   # action history of frame base
         self._step0 = 0                                    # episode step of frame base
-        self._cur: Optional[int] = None                    # frame number of the current state
+        self._cur: int | None = None                    # frame number of the current state
         self._unpublished_steps = 0
         self._t = int(self._ctr[CURSOR])                   # next frame number to write
         if self._ctr[PUBLISHED] < self._t:                 # a previous writer died mid-block
@@ -138,7 +136,7 @@ class NStepWriter:
         self._shift(self._cur + 1)
         self._cur = None
 
-    def _commit(self, end: int, final: Optional[int] = None, terminated: bool = False,
+    def _commit(self, end: int, final: int | None = None, terminated: bool = False,
                 boot_final: float = 0.0) -> None:
         """Write the metadata of every frame written since ``base``, then the transitions
         starting at frames ``[base, end)`` (all in the current episode; ``final`` is the local

@@ -12,7 +12,6 @@ import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
-from typing import List, Optional
 
 import numpy as np
 
@@ -47,7 +46,7 @@ class Actor:
     """Acting on ``len(spec.streams)`` environments; ``step()`` advances all of them by one step."""
 
     def __init__(self, cfg: Config, spec: ActorSpec, storage, control, weights,
-                 parent_pid: Optional[int] = None):
+                 parent_pid: int | None = None):
         import torch
 
         from dqn_mine.agent.explore import Explorer
@@ -90,7 +89,7 @@ class Actor:
         self.steps = 0
         self.episodes = 0
         self.evaluations = 0
-        self.recording: Optional[list] = None  # frames of an evaluation episode being recorded
+        self.recording: list | None = None  # frames of an evaluation episode being recorded
         f, (c, h, w) = cfg.frame_stack, self.envs[0].observation_space.shape
         self.stacks = np.zeros((len(self.envs), f * c, h, w), dtype=np.uint8)  # [E, 3f, H, W]
         self.carrying = np.zeros(len(self.envs), dtype=np.float32)
@@ -277,7 +276,7 @@ def actor_main(cfg: Config, spec: ActorSpec, handle: tuple, errors) -> None:
         Actor(cfg, spec, storage, control, weights, parent_pid=parent).run()
     except BaseException as exc:  # report every failure to the runner, then exit non-zero
         errors.send((spec.index, f"{type(exc).__name__}: {exc}", traceback.format_exc()))
-        raise SystemExit(1)
+        raise SystemExit(1) from None
     finally:
         if blocks is not None:
             blocks.close()
@@ -321,7 +320,7 @@ def review_phase(cfg: Config, phase: int, rng: np.random.Generator) -> int:
     return int(rng.integers(phase + 1, easiest + 1))
 
 
-def actor_specs(cfg: Config, generation: int = 0) -> List[ActorSpec]:
+def actor_specs(cfg: Config, generation: int = 0) -> list[ActorSpec]:
     """One spec per training actor (streams numbered actor-major), then the evaluation actor.
 
     ``generation`` counts the starts of a run (0, then +1 per resume): each draws new seeds."""
@@ -391,7 +390,7 @@ def learner_may_update(cfg: Config, updates: int, actor_steps: int) -> bool:
     return updates < cfg.replay_ratio * (actor_steps - prefill_target(cfg))
 
 
-def first_error(conn) -> Optional[tuple]:
+def first_error(conn) -> tuple | None:
     """The error an actor reported on its pipe, if any (non-blocking)."""
     try:
         return conn.recv() if conn.poll() else None

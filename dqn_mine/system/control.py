@@ -9,7 +9,7 @@ cannot.
 
 from __future__ import annotations
 
-from typing import List, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
@@ -39,7 +39,7 @@ class Control:
         self._ep_read = np.zeros(len(self.ep_written), dtype=np.int64)  # reader-local cursor
 
     @staticmethod
-    def specs(num_actors: int) -> List[BlockSpec]:
+    def specs(num_actors: int) -> list[BlockSpec]:
         """``num_actors`` counts every acting process, the evaluation actor included."""
         a = max(1, num_actors)
         return [
@@ -86,9 +86,9 @@ class Control:
         self.ep_ring[actor, n % EPISODE_RING] = (ret, length, phase, float(is_eval))
         self.ep_written[actor] = n + 1
 
-    def drain_episodes(self) -> List[Episode]:
+    def drain_episodes(self) -> list[Episode]:
         """Reader side (the learner): every record published since the last call."""
-        out: List[Episode] = []
+        out: list[Episode] = []
         for actor, written in enumerate(self.ep_written.copy()):
             start = max(int(self._ep_read[actor]), int(written) - EPISODE_RING)
             for n in range(start, int(written)):

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from typing import List
-
 from dqn_mine.config import Config
 from dqn_mine.system.shared import BlockSpec
 
@@ -29,7 +27,7 @@ def acting_processes(cfg: Config) -> int:
     return cfg.actors + (1 if getattr(cfg, "eval_every", 0) else 0)
 
 
-def run_block_specs(cfg: Config, net) -> List[BlockSpec]:
+def run_block_specs(cfg: Config, net) -> list[BlockSpec]:
     from dqn_mine.system.control import Control
     from dqn_mine.system.weights import WeightBroadcast
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import queue
 import threading
-from typing import Callable, Optional
+from typing import Callable
 
 import numpy as np
 
@@ -24,8 +24,8 @@ class BatchSource:
                  queue_size: int = 4, threaded: bool = True):
         self.replay, self.batch_size, self.beta, self.to_device = replay, batch_size, beta, \
             to_device
-        self.ready: "queue.Queue" = queue.Queue(maxsize=queue_size)
-        self.error: Optional[BaseException] = None
+        self.ready: queue.Queue = queue.Queue(maxsize=queue_size)
+        self.error: BaseException | None = None
         self._stop = threading.Event()
         self._thread = None
         if threaded:
@@ -81,7 +81,7 @@ class Learner:
     """The update loop's state: network updater, batch source, weight publishing."""
 
     def __init__(self, cfg: Config, storage, control, weights, device: str,
-                 threaded: bool = True, replay_snapshot: Optional[str] = None):
+                 threaded: bool = True, replay_snapshot: str | None = None):
         """``replay_snapshot``: a saved replay to read back (before the prefetch thread starts
         sampling); ``restored`` then holds its live transitions."""
         from dqn_mine.agent.learning import DQNUpdater, batch_to_device
@@ -123,7 +123,7 @@ class Learner:
     def publish(self) -> None:
         self.weights.publish(self.updater.online)
 
-    def step(self) -> Optional[dict]:
+    def step(self) -> dict | None:
         """One network update; None if no batch was ready."""
         item = self.source.get()
         if item is None:

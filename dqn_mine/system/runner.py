@@ -18,14 +18,20 @@ import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
-from typing import List, Optional
 
 from dqn_mine.config import Config, learner_threads, resolve_device
 from dqn_mine.metrics import MetricsTable, RateMeter, Rolling, progress_postfix
 from dqn_mine.replay.snapshot import SnapshotError
 from dqn_mine.system import checkpoint as ckpt
-from dqn_mine.system.actor import (Actor, actor_main, actor_specs, first_error, initial_phase,
-                                   learner_may_update, prefill_target)
+from dqn_mine.system.actor import (
+    Actor,
+    actor_main,
+    actor_specs,
+    first_error,
+    initial_phase,
+    learner_may_update,
+    prefill_target,
+)
 from dqn_mine.system.control import Control
 from dqn_mine.system.layout import replay_layout, run_block_specs
 from dqn_mine.system.learner import Learner
@@ -34,7 +40,7 @@ from dqn_mine.system.shared import SharedBlocks
 EXIT_OK, EXIT_FAILED, EXIT_INTERRUPTED = 0, 1, 130
 
 
-def saved_replay(cfg: Config) -> Optional[str]:
+def saved_replay(cfg: Config) -> str | None:
     """``--save-replay``'s folder when a resumed run has a replay saved there, else None."""
     from dqn_mine.replay import snapshot
 
@@ -69,10 +75,10 @@ class StopSignals:
     """SIGINT/SIGTERM set a flag the loops poll, so shutdown always runs the same clean path."""
 
     def __init__(self):
-        self.received: Optional[str] = None
+        self.received: str | None = None
         self._old = {}
 
-    def __enter__(self) -> "StopSignals":
+    def __enter__(self) -> StopSignals:
         for sig in (signal.SIGINT, signal.SIGTERM):
             self._old[sig] = signal.signal(sig, self._handle)
         return self
@@ -95,7 +101,7 @@ class ProcessActors:
         # One pipe per actor for its error report: unlike a Queue it has no named semaphore to
         # leak when an actor is killed.
         self.errors = []
-        self.procs: List[mp.Process] = []
+        self.procs: list[mp.Process] = []
         for spec in actor_specs(cfg, generation):
             receive, send = ctx.Pipe(duplex=False)
             p = ctx.Process(target=actor_main, args=(cfg, spec, handle, send),
@@ -169,7 +175,7 @@ class InlineActors:
 class Run:
     """One training run; ``execute()`` returns its :class:`Summary`."""
 
-    def __init__(self, cfg: Config, run_dir: Path, state: Optional[dict] = None,
+    def __init__(self, cfg: Config, run_dir: Path, state: dict | None = None,
                  serial: bool = False, progress: bool = True):
         # cfg is what this process runs with (a restored replay sets its pre-fill to 0);
         # saved_cfg is what checkpoints record.
@@ -190,7 +196,7 @@ class Run:
         self.curriculum_returns = Rolling(cfg.curriculum_window)
         self.phase = int(counters.get("phase", initial_phase(cfg)))
         self.first_update = int(counters.get("updates", 0))
-        self.train_started: Optional[float] = None   # monotonic time the update loop began
+        self.train_started: float | None = None   # monotonic time the update loop began
         self.train_start_steps = 0
         self.started = time.monotonic()
         self.reason = "finished"
@@ -300,7 +306,7 @@ class Run:
             blocks.close()
         return self.summary(code)
 
-    def replay_to_restore(self) -> Optional[str]:
+    def replay_to_restore(self) -> str | None:
         """The saved replay a resumed run reads back, if it has one."""
         path = saved_replay(self.cfg)
         if self.cfg.resume and self.cfg.save_replay and path is None:
