@@ -22,14 +22,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
-try:  # the environment package owns the list of tasks once it exists
-    from dqn_mine.env import TASKS
-    from dqn_mine.env.tasks import MAX_ROOMS
-except ImportError:
-    TASKS = ("one-room", "two-room", "three-room", "rooms")
-    MAX_ROOMS = 12
+from dqn_mine.env.tasks import MAX_ROOMS, PLACEMENTS, TASKS
+from dqn_mine.replay.writer import FLUSH_EVERY
 
-PLACEMENTS = ("fixed", "any-room")
 DEVICES = ("auto", "cpu", "cuda")
 ACTOR_PRECISIONS = ("auto", "float32", "bfloat16")
 LEARNER_PRECISIONS = ACTOR_PRECISIONS   # auto, or a dtype by name
@@ -151,6 +146,17 @@ class Config:
     tensorboard: bool = _f(False, "also write every metrics row to TensorBoard event files in "
                            "RUN_DIR/tb (needs the tensorboard package: pip install -e .[tb])")
 
+    # -- derived counts ----------------------------------------------------------------------
+    @property
+    def num_streams(self) -> int:
+        """One replay stream (ring) per training environment."""
+        return self.actors * self.envs_per_actor
+
+    @property
+    def acting_processes(self) -> int:
+        """Training actors plus the evaluation actor (when evaluation is on)."""
+        return self.actors + (1 if self.eval_every else 0)
+
     # -- checks ------------------------------------------------------------------------------
     def validate(self) -> Config:
         """Raise :class:`ConfigError` (one line) for an impossible configuration; return self."""
@@ -263,6 +269,12 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 def _problems(c: Config) -> list[str]:
     """Every impossible setting, as one-line messages (first one is raised)."""
+    return (_choice_problems(c) + _bound_problems(c) + _replay_problems(c) + _rate_problems(c)
+            + _task_problems(c))
+
+
+def _choice_problems(c: Config) -> list[str]:
+    """Named values that are not among their choices, and a missing optional package."""
     import importlib.util
 
     p = []
@@ -278,6 +290,12 @@ def _problems(c: Config) -> list[str]:
         p.append(f"--eval-task: unknown task {c.eval_task!r} (choose from {', '.join(TASKS)})")
     if c.preset not in PRESETS:
         p.append(f"--preset: unknown preset {c.preset!r} (choose from {', '.join(PRESETS)})")
+    return p
+
+
+def _bound_problems(c: Config) -> list[str]:
+    """Counts below their least value."""
+    p = []
     at_least = {"actors": 1, "envs_per_actor": 1, "n_step": 1, "batch_size": 1, "frame_stack": 1,
                 "history_len": 0, "prefill": 0, "updates": 1, "target_update_interval": 1,
                 "publish_interval": 1, "learner_queue": 1, "learner_threads": 0, "eval_every": 0,
@@ -289,7 +307,13 @@ def _problems(c: Config) -> list[str]:
             p.append(f"--{_flag(name)} must be at least {low}, got {getattr(c, name)}")
     if c.n_step > 254:  # the replay stores the bootstrap offset in one byte
         p.append(f"--n-step must be at most 254, got {c.n_step}")
-    streams = c.actors * c.envs_per_actor
+    return p
+
+
+def _replay_problems(c: Config) -> list[str]:
+    """A replay too small for the batch, the n-step windows or the writers' flushes."""
+    p = []
+    streams = c.num_streams
     if c.replay_capacity < c.batch_size:
         p.append(f"--replay-capacity {c.replay_capacity} is smaller than --batch-size "
                  f"{c.batch_size}")
@@ -301,6 +325,12 @@ def _problems(c: Config) -> list[str]:
                  f"{min_live_transitions(c)} sampleable transitions over {streams} actor "
                  f"environments (frames still being written are not sampleable), fewer than "
                  f"--batch-size {c.batch_size}")
+    return p
+
+
+def _rate_problems(c: Config) -> list[str]:
+    """Rates and exponents out of their ranges."""
+    p = []
     if not 0.0 < c.gamma <= 1.0:
         p.append(f"--gamma must be in (0, 1], got {c.gamma}")
     for name in ("epsilon", "eval_epsilon"):
@@ -322,6 +352,12 @@ def _problems(c: Config) -> list[str]:
         p.append(f"--max-grad-norm must be >= 0 (0 = off), got {c.max_grad_norm}")
     if c.replay_ratio is not None and not c.replay_ratio > 0:
         p.append(f"--replay-ratio must be positive, got {c.replay_ratio}")
+    return p
+
+
+def _task_problems(c: Config) -> list[str]:
+    """Task settings the environment or the curriculum cannot run."""
+    p = []
     if not 0 < c.room_size < math.inf:
         p.append(f"--room-size must be a positive finite number, got {c.room_size}")
     if c.max_episode_steps is not None and c.max_episode_steps < 1:
@@ -470,16 +506,22 @@ def parse_args(argv: Optional[list[str]] = None) -> Config:
 
 def min_live_transitions(c: Config) -> int:
     """Sampleable transitions in a full replay at worst: each environment's ring holds back up to
-    one writer flush (at most 64 steps) plus an n-step window and a frame stack of frames that
-    start no complete transition yet (NStepWriter)."""
-    streams = c.actors * c.envs_per_actor
+    one writer flush (at most FLUSH_EVERY steps) plus an n-step window and a frame stack of
+    frames that start no complete transition yet (NStepWriter)."""
+    streams = c.num_streams
     m = c.replay_capacity // streams
-    held_back = min(64, m - c.n_step - c.frame_stack) + c.n_step + c.frame_stack + 1
+    held_back = min(FLUSH_EVERY, m - c.n_step - c.frame_stack) + c.n_step + c.frame_stack + 1
     return streams * max(0, m - held_back)
 
 
 # Settings that shape the network: a resumed run must keep its checkpoint's.
 NETWORK_SHAPE = ("frame_stack", "history_len")
+
+
+def network_shape(cfg) -> dict[str, int]:
+    """The network's constructor arguments, from a Config or its saved dict (a checkpoint's)."""
+    values = cfg if isinstance(cfg, dict) else cfg.to_dict()
+    return {name: values[name] for name in NETWORK_SHAPE}
 
 
 def learner_threads(cfg: Config, cores: Optional[int] = None) -> int:
@@ -492,8 +534,7 @@ def learner_threads(cfg: Config, cores: Optional[int] = None) -> int:
 
     if cfg.learner_threads:
         return cfg.learner_threads
-    acting = cfg.actors + (1 if cfg.eval_every else 0)
-    return max(1, (cores or os.cpu_count() or 1) - acting)
+    return max(1, (cores or os.cpu_count() or 1) - cfg.acting_processes)
 
 
 def resolve_device(name: str):

@@ -13,6 +13,7 @@ import math
 import sys
 from pathlib import Path
 
+from dqn_mine.exitcodes import EXIT_BAD_INPUT
 from dqn_mine.metrics import read_metrics
 
 
@@ -87,10 +88,10 @@ def main(argv: list[str] | None = None) -> int:
         import matplotlib  # noqa: F401
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     except ImportError:
         print("error: plotting needs matplotlib: pip install -e .[plot]", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     out = plot_runs(runs, Path(args.out) if args.out else Path(args.runs[0]) / "curves.png")
     print(f"wrote {out}")
     return 0

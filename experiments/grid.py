@@ -71,7 +71,7 @@ class RunSpec:
 
     def processes(self) -> int:
         """Busy processes while it runs: actors, the evaluation actor, the learner."""
-        return self.cfg.actors + (1 if self.cfg.eval_every else 0) + 1
+        return self.cfg.acting_processes + 1
 
 
 @dataclass(frozen=True)

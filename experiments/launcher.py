@@ -33,9 +33,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dqn_mine.config import Config, ConfigError
+from dqn_mine.exitcodes import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from experiments.grid import RunSpec
 
-EXIT_OK, EXIT_FAILED, EXIT_INTERRUPTED = 0, 1, 130
 LOG = "train.log"
 # Settings a resume may change without making it another run.
 RESUMABLE = {"updates", "resume", "run_dir", "progress"}
@@ -186,12 +186,14 @@ class Sweep:
     def _finish(self, r: _Running) -> Outcome:
         code, seconds = r.proc.returncode, time.monotonic() - r.started
         summary = _read_json(r.spec.run_dir / "summary.json") or {}
-        what = {0: "finished", 130: "interrupted", 2: "bad input"}.get(code, "FAILED")
+        what = {EXIT_OK: "finished", EXIT_INTERRUPTED: "interrupted",
+                EXIT_BAD_INPUT: "bad input"}.get(code, "FAILED")
         ret = summary.get("episode_return")
         ret_text = f", mean return {ret:.3f}" if isinstance(ret, float) and ret == ret else ""
         self.echo(f"{r.spec.label}: {what} (exit {code}) after {summary.get('updates', '?')} "
                   f"updates in {seconds:.0f} s{ret_text}"
-                  + ("" if code in (0, 130) else f"; see {r.spec.run_dir / LOG}"))
+                  + ("" if code in (EXIT_OK, EXIT_INTERRUPTED)
+                     else f"; see {r.spec.run_dir / LOG}"))
         return Outcome(r.spec, r.state, code, seconds)
 
 

@@ -9,10 +9,10 @@ import torch
 from dqn_mine.agent.network import DuelingQNetwork
 from dqn_mine.config import PRESETS, Config
 from dqn_mine.replay import ReplayStorage
+from dqn_mine.shared import SharedBlocks
 from dqn_mine.system.actor import Actor, actor_specs
 from dqn_mine.system.control import Control
 from dqn_mine.system.layout import replay_layout, run_block_specs
-from dqn_mine.system.shared import SharedBlocks
 from dqn_mine.system.weights import WeightBroadcast
 
 

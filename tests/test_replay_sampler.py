@@ -12,7 +12,7 @@ from dqn_mine.replay import (
     beta_at,
 )
 from dqn_mine.replay.storage import CURSOR, PUBLISHED
-from dqn_mine.system.shared import SharedBlocks
+from dqn_mine.shared import SharedBlocks
 
 
 @pytest.fixture

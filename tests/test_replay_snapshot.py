@@ -5,7 +5,7 @@ import pytest
 
 from dqn_mine.replay import NStepWriter, PrioritizedReplay, ReplayLayout, ReplayStorage, snapshot
 from dqn_mine.replay.storage import BLOCK_NAMES, CURSOR
-from dqn_mine.system.shared import SharedBlocks
+from dqn_mine.shared import SharedBlocks
 
 LAYOUT = ReplayLayout(num_streams=2, stream_capacity=64, frame_shape=(3, 4, 5), history_len=3,
                       n_step=3, gamma=0.9)

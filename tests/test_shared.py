@@ -1,4 +1,4 @@
-"""dqn_mine.system.shared: allocation, attachment from spawned processes, cleanup, free space."""
+"""dqn_mine.shared: allocation, attachment from spawned processes, cleanup, free space."""
 
 import multiprocessing as mp
 import os
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dqn_mine.replay import ReplayLayout
-from dqn_mine.system.shared import (
+from dqn_mine.shared import (
     BlockSpec,
     SharedBlocks,
     SharedMemoryError,

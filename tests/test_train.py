@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from dqn_mine.system.shared import leftover_segments
+from dqn_mine.shared import leftover_segments
 
 ROOT = Path(__file__).resolve().parents[1]
 # A tiny fast configuration on top of the smoke preset.
@@ -117,7 +117,7 @@ def test_serial_run_writes_the_run_folder(tmp_path):
 
 
 def test_saved_replay_is_read_back_on_resume_without_a_prefill(tmp_path):
-    from dqn_mine.system import checkpoint as ckpt
+    from dqn_mine import checkpoint as ckpt
 
     run_dir, replay_dir = tmp_path / "run", tmp_path / "replay"
     res = run_train(*TINY, "--serial", "--updates", "40", "--run-dir", str(run_dir),
@@ -152,7 +152,7 @@ def test_resumed_actors_draw_new_seeds():
 
 def test_resume_takes_the_new_learning_rate(tmp_path):
     """Flags given on resume win, the optimiser's saved learning rate included."""
-    from dqn_mine.system import checkpoint as ckpt
+    from dqn_mine import checkpoint as ckpt
 
     run_dir = tmp_path / "resumed"
     res = run_train(*TINY, "--serial", "--updates", "40", "--run-dir", str(run_dir))
@@ -170,9 +170,9 @@ def test_replay_ratio_budget_counts_updates_since_the_actor_started():
     from types import SimpleNamespace
 
     from dqn_mine.config import parse_args
+    from dqn_mine.shared import SharedBlocks
     from dqn_mine.system.actor import Actor
     from dqn_mine.system.control import Control
-    from dqn_mine.system.shared import SharedBlocks
 
     cfg = parse_args(["--actors", "2", "--prefill", "200", "--replay-ratio", "0.05",
                       "--batch-size", "32"])
@@ -244,7 +244,7 @@ def test_sigint_stops_cleanly_and_resume_continues(tmp_path, save_replay):
     assert "--resume" in out
     wait_for(lambda: not alive(kids), 10, "every child process to exit")
     stopped_at = int(metrics_rows(run_dir)[-1]["update"])
-    from dqn_mine.system import checkpoint as ckpt
+    from dqn_mine import checkpoint as ckpt
 
     # the last metrics row is the stop itself, not the last log interval before it
     assert int(ckpt.load(run_dir)["counters"]["updates"]) == stopped_at

@@ -27,13 +27,13 @@ class TensorBatch(NamedTuple):
     ``indices`` stays a numpy array on the host: it is only used to send priorities back.
     """
 
-    obs: torch.Tensor            # uint8 [B, 3f, 44, 76]
+    obs: torch.Tensor            # uint8 [B, 3f, H, W]
     history: torch.Tensor        # int8 [B, h], -1 = no action yet
     carrying: torch.Tensor       # float32 [B]
     action: torch.Tensor         # int64 [B]
     ret: torch.Tensor            # float32 [B], discounted n-step return
     discount: torch.Tensor       # float32 [B], gamma**k, 0 after termination
-    next_obs: torch.Tensor       # uint8 [B, 3f, 44, 76]
+    next_obs: torch.Tensor       # uint8 [B, 3f, H, W]
     next_history: torch.Tensor   # int8 [B, h]
     next_carrying: torch.Tensor  # float32 [B]
     weights: torch.Tensor        # float32 [B], importance-sampling weights (max 1)

@@ -20,8 +20,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-FRAME_SHAPE = (3, 44, 76)
-NUM_ACTIONS = 6
+from dqn_mine.env.interface import FRAME_SHAPE, NUM_ACTIONS
 
 
 def one_hot_history(history: torch.Tensor, num_actions: int) -> torch.Tensor:

@@ -33,11 +33,12 @@ class AgentPolicy:
     @classmethod
     def from_checkpoint(cls, path, epsilon: float = 0.0, seed: int = 0) -> AgentPolicy:
         """Raises CheckpointError (one line) for a missing or corrupt checkpoint."""
-        from dqn_mine.system import checkpoint as ckpt
+        from dqn_mine import checkpoint as ckpt
+        from dqn_mine.config import network_shape
 
         state = ckpt.load(path)
         cfg = state["config"]
-        net = DuelingQNetwork(frame_stack=cfg["frame_stack"], history_len=cfg["history_len"])
+        net = DuelingQNetwork(**network_shape(cfg))
         try:
             net.load_state_dict(state["updater"]["online"])
         except (RuntimeError, TypeError) as exc:  # wrong or damaged tensors

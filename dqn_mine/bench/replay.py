@@ -35,7 +35,7 @@ from dqn_mine.replay import (
     ReplayStorage,
     SumTree,
 )
-from dqn_mine.system.shared import SharedBlocks
+from dqn_mine.shared import SharedBlocks
 
 try:
     import cpprb

@@ -28,7 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dqn_mine.system.shared import BlockSpec, SharedBlocks
+from dqn_mine.env.interface import FRAME_SHAPE, NUM_ACTIONS
+from dqn_mine.shared import BlockSpec, SharedBlocks
 
 # columns of the counters block
 CURSOR, PUBLISHED, STEPS, EPISODES = 0, 1, 2, 3
@@ -44,12 +45,12 @@ class ReplayLayout:
 
     num_streams: int                               # one ring per environment stream
     stream_capacity: int                           # M: slots per stream
-    frame_shape: tuple[int, ...] = (3, 44, 76)     # one RGB frame, channels first
+    frame_shape: tuple[int, ...] = FRAME_SHAPE     # one RGB frame, channels first
     history_len: int = 20                          # h: actions kept as the action history
     n_step: int = 6                                # n of the n-step return
     gamma: float = 0.99                            # discount per step
     frame_stack: int = 1                           # f: frames stacked into an observation
-    num_actions: int = 6                           # size of the Q vector an actor supplies
+    num_actions: int = NUM_ACTIONS                 # size of the Q vector an actor supplies
 
     def __post_init__(self):
         if not 1 <= self.n_step <= 254:
@@ -68,10 +69,6 @@ class ReplayLayout:
     @property
     def capacity(self) -> int:
         return self.num_streams * self.stream_capacity
-
-    @property
-    def frame_nbytes(self) -> int:
-        return int(np.prod(self.frame_shape))
 
     def block_specs(self) -> list[BlockSpec]:
         """Every shared array of the replay (``SharedBlocks.create`` allocates them)."""
@@ -109,9 +106,6 @@ class ReplayStorage:
     def total_written(self) -> int:
         """Environment steps published by all writers (the denominator of the replay ratio)."""
         return int(self.counters[:, STEPS].sum())
-
-    def episodes_written(self) -> int:
-        return int(self.counters[:, EPISODES].sum())
 
     def slot(self, stream: int, t):
         """Slot of frame number ``t`` of ``stream`` (int or int array)."""

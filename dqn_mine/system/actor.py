@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dqn_mine.config import Config, resolve_actor_precision
+from dqn_mine.config import Config, network_shape, resolve_actor_precision
 
 
 @dataclass(frozen=True)
@@ -71,7 +71,7 @@ class Actor:
                                  durations=cfg.exploration == "ez" and training,
                                  mu=cfg.ez_mu, max_duration=cfg.ez_max_duration,
                                  unstick=cfg.unstick and training)
-        self.net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
+        self.net = DuelingQNetwork(**network_shape(cfg))
         # Pulled float32 weights are converted on load (WeightBroadcast copies into the tensors).
         self.net.to(resolve_actor_precision(cfg.actor_precision, spec.num_envs)).eval()
         self.version = -1
@@ -245,7 +245,7 @@ class Actor:
                 self.recording.append(self.envs[0].render())
 
     def _save_recording(self) -> None:
-        from dqn_mine.play import save_gif
+        from dqn_mine.video import save_gif
 
         frames, self.recording = self.recording, None
         name = f"eval_{self.control.total_actor_steps():010d}.gif"
@@ -285,9 +285,9 @@ def actor_main(cfg: Config, spec: ActorSpec, handle: tuple, errors) -> None:
 def attach_all(cfg: Config, handle: tuple):
     """Attach the run's blocks and build the views an acting process needs."""
     from dqn_mine.replay import ReplayStorage
+    from dqn_mine.shared import SharedBlocks
     from dqn_mine.system.control import Control
     from dqn_mine.system.layout import replay_layout
-    from dqn_mine.system.shared import SharedBlocks
     from dqn_mine.system.weights import WeightBroadcast
 
     blocks = SharedBlocks.attach(handle)

@@ -13,7 +13,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from dqn_mine.system.shared import BlockSpec, SharedBlocks
+from dqn_mine.shared import BlockSpec, SharedBlocks
 
 EPISODE_RING = 4096  # per actor; the learner drains far more often than actors finish this many
 

@@ -14,7 +14,7 @@ from typing import Callable
 
 import numpy as np
 
-from dqn_mine.config import Config, resolve_learner_precision
+from dqn_mine.config import Config, network_shape, resolve_learner_precision
 
 
 class BatchSource:
@@ -89,7 +89,7 @@ class Learner:
         from dqn_mine.replay import PrioritizedReplay
 
         self.cfg, self.control, self.weights, self.device = cfg, control, weights, device
-        net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
+        net = DuelingQNetwork(**network_shape(cfg))
         self.updater = DQNUpdater(net, lr=cfg.lr, target_update_interval=cfg.target_update_interval,
                                   device=device, max_grad_norm=cfg.max_grad_norm,
                                   precision=resolve_learner_precision(cfg.learner_precision,

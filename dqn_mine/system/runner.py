@@ -19,10 +19,12 @@ import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
-from dqn_mine.config import Config, learner_threads, resolve_device
+from dqn_mine import checkpoint as ckpt
+from dqn_mine.config import Config, learner_threads, network_shape, resolve_device
+from dqn_mine.exitcodes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from dqn_mine.metrics import MetricsTable, RateMeter, Rolling, progress_postfix
 from dqn_mine.replay.snapshot import SnapshotError
-from dqn_mine.system import checkpoint as ckpt
+from dqn_mine.shared import SharedBlocks
 from dqn_mine.system.actor import (
     Actor,
     actor_main,
@@ -35,9 +37,6 @@ from dqn_mine.system.actor import (
 from dqn_mine.system.control import Control
 from dqn_mine.system.layout import replay_layout, run_block_specs
 from dqn_mine.system.learner import Learner
-from dqn_mine.system.shared import SharedBlocks
-
-EXIT_OK, EXIT_FAILED, EXIT_INTERRUPTED = 0, 1, 130
 
 
 def saved_replay(cfg: Config) -> str | None:
@@ -253,8 +252,7 @@ class Run:
 
         device = resolve_device(self.cfg.device)
         torch.set_num_threads(learner_threads(self.cfg))
-        template = DuelingQNetwork(frame_stack=self.cfg.frame_stack,
-                                   history_len=self.cfg.history_len)
+        template = DuelingQNetwork(**network_shape(self.cfg))
         blocks = SharedBlocks.create(run_block_specs(self.cfg, template))
         self.actors = None
         code = EXIT_OK

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from dqn_mine.system.shared import BlockSpec, SharedBlocks
+from dqn_mine.shared import BlockSpec, SharedBlocks
 
 WEIGHTS = "weights"
 SEQ = "weights_seq"
