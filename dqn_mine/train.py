@@ -37,7 +37,7 @@ def check_shared_memory(cfg: Config) -> None:
 def check_env_settings(cfg: Config) -> None:
     """Let the environment judge its own arguments (it creates no GL context until it renders)."""
     from dqn_mine.env import MineRescueEnv
-    from dqn_mine.system.actor import actor_specs
+    from dqn_mine.system.specs import actor_specs
 
     for spec in actor_specs(cfg)[-1:] + actor_specs(cfg)[:1]:
         try:

@@ -22,19 +22,9 @@ import random
 from collections import deque
 
 from dqn_mine.env.entities import KIT, Entity
+from dqn_mine.env.interface import BACKWARD, FORWARD, INTERACT, TURN_LEFT, TURN_RIGHT
 from dqn_mine.env.layout import Door
-from dqn_mine.env.mine import (
-    AGENT_RADIUS,
-    ASIDE_CLEARANCE,
-    BACKWARD,
-    DROP_GAP,
-    FORWARD,
-    HEADINGS,
-    INTERACT,
-    TURN_LEFT,
-    TURN_RIGHT,
-    MineEnv,
-)
+from dqn_mine.env.mine import AGENT_RADIUS, ASIDE_CLEARANCE, DROP_GAP, HEADINGS, MineEnv
 
 CELL = 0.5              # grid resolution inside a room
 MARGIN = 0.2            # extra clearance the planner keeps from walls and entities

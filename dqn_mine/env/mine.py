@@ -16,13 +16,11 @@ from gymnasium import spaces
 
 from dqn_mine.env import mesh
 from dqn_mine.env.entities import BOULDER, KIT, MINER, Entity, local_mesh
-from dqn_mine.env.interface import (  # noqa: F401  (ACTION_NAMES: the README names it here)
-    ACTION_NAMES,
+from dqn_mine.env.interface import (
     BACKWARD,
     FORWARD,
     FRAME_SHAPE,
     INTERACT,
-    NOOP,
     NUM_ACTIONS,
     OBS_HEIGHT,
     OBS_WIDTH,

@@ -78,7 +78,12 @@ class BatchSource:
 
 
 class Learner:
-    """The update loop's state: network updater, batch source, weight publishing."""
+    """The update loop: network updater, batch source, weight publishing, and the update count.
+
+    The runner talks to it through :meth:`ingest` (pre-fill), :meth:`step`, :meth:`publish`,
+    :meth:`state_dict` / :meth:`load_state` (checkpoints), :meth:`save_replay` and the counters
+    ``updates`` and ``new_updates``; ``control.updates`` mirrors ``updates`` for the actors.
+    """
 
     def __init__(self, cfg: Config, storage, control, weights, device: str,
                  threaded: bool = True, replay_snapshot: str | None = None):
@@ -101,11 +106,25 @@ class Learner:
             from dqn_mine.replay import snapshot
 
             self.restored = snapshot.load(replay_snapshot, storage, self.replay)
-        self.updates = 0
+        self.updates = 0            # of the whole run, resumes included
+        self.first_update = 0       # ``updates`` when this process started (0, or a checkpoint's)
         self.source = BatchSource(
             self.replay, cfg.batch_size, beta=self.beta,
             to_device=lambda b: batch_to_device(b, device), queue_size=cfg.learner_queue,
             threaded=threaded)
+
+    @property
+    def new_updates(self) -> int:
+        """Updates made by this process (a resumed run's budget and rates count only these)."""
+        return self.updates - self.first_update
+
+    def replay_size(self) -> int:
+        """Live transitions in the replay."""
+        return len(self.replay)
+
+    def ingest(self) -> int:
+        """Take in what the actors published, before the sampling thread starts (pre-fill)."""
+        return self.source.ingest()
 
     def beta(self) -> float:
         from dqn_mine.replay import beta_at
@@ -117,8 +136,12 @@ class Learner:
         # The optimiser's state carries the old learning rate; a resumed run's --lr wins.
         for group in self.updater.optimizer.param_groups:
             group["lr"] = self.cfg.lr
-        self.updates = int(state["counters"]["updates"])
+        self.updates = self.first_update = int(state["counters"]["updates"])
         self.control.updates = self.updates
+
+    def state_dict(self) -> dict:
+        """Network, target and optimiser (what a checkpoint keeps of the learner)."""
+        return self.updater.state_dict()
 
     def publish(self) -> None:
         self.weights.publish(self.updater.online)
