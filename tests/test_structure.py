@@ -125,5 +125,6 @@ def cited_paths() -> dict[str, list[str]]:
 
 def test_every_cited_document_exists():
     cited = cited_paths()
+    assert "README.md" in cited["docs/design.md"], "the README links the design page"
     missing = {path: where for path, where in cited.items() if not (ROOT / path).exists()}
     assert not missing, missing
