@@ -4,6 +4,8 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 # The CPU wheel of this torch lies on the dev/CI disk; on a GPU machine the same pin pulls the CUDA build.
 TORCH  ?= torch==2.13.0
+# The linter is pinned: a new ruff release must not turn a green tree red. Settings: ruff.toml.
+RUFF   := ruff==0.17.6
 PYTEST_ARGS ?=
 
 .PHONY: install test test-fast lint train bench gpu-check clean
@@ -23,8 +25,8 @@ test-fast: install
 	$(PY) -m pytest -m "not slow" $(PYTEST_ARGS)
 
 lint: install
-	$(PY) -m pip install -q ruff
-	$(VENV)/bin/ruff check --select E,F,W --line-length 100 dqn_mine tests experiments
+	$(PY) -m pip install -q "$(RUFF)"
+	$(VENV)/bin/ruff check dqn_mine tests experiments
 
 train: install
 	$(PY) -m dqn_mine.train --preset smoke

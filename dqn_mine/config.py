@@ -1,3 +1,5 @@
+# typing.get_type_hints evaluates these annotations, and `X | None` fails there on Python 3.9.
+# ruff: noqa: UP007, UP045
 """The run configuration: one frozen dataclass, the command line generated from it, json I/O.
 
 Every field carries a one-line ``help`` that becomes its ``--flag`` help. Precedence of values:
@@ -18,16 +20,11 @@ import time
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Optional
 
-try:  # the environment package owns the list of tasks once it exists
-    from dqn_mine.env import TASKS
-    from dqn_mine.env.tasks import MAX_ROOMS
-except ImportError:
-    TASKS = ("one-room", "two-room", "three-room", "rooms")
-    MAX_ROOMS = 12
+from dqn_mine.env.tasks import MAX_ROOMS, PLACEMENTS, TASKS
+from dqn_mine.replay.writer import FLUSH_EVERY
 
-PLACEMENTS = ("fixed", "any-room")
 DEVICES = ("auto", "cpu", "cuda")
 ACTOR_PRECISIONS = ("auto", "float32", "bfloat16")
 LEARNER_PRECISIONS = ACTOR_PRECISIONS   # auto, or a dtype by name
@@ -71,7 +68,7 @@ class Config:
     curriculum_window: int = _f(50, "episodes in the rolling mean that advances the curriculum")
     curriculum_review: float = _f(0.0, "adaptive curriculum: share of episodes that start in an "
                                   "easier phase already passed (0 = the study's rule)")
-    rooms_schedule: Tuple[int, ...] = _f((3, 4, 5), "room counts of the schedule curriculum, each "
+    rooms_schedule: tuple[int, ...] = _f((3, 4, 5), "room counts of the schedule curriculum, each "
                                          "for an equal share of the updates")
     # -- actors ------------------------------------------------------------------------------
     actors: int = _f(7, "number of actor processes")
@@ -149,14 +146,25 @@ class Config:
     tensorboard: bool = _f(False, "also write every metrics row to TensorBoard event files in "
                            "RUN_DIR/tb (needs the tensorboard package: pip install -e .[tb])")
 
+    # -- derived counts ----------------------------------------------------------------------
+    @property
+    def num_streams(self) -> int:
+        """One replay stream (ring) per training environment."""
+        return self.actors * self.envs_per_actor
+
+    @property
+    def acting_processes(self) -> int:
+        """Training actors plus the evaluation actor (when evaluation is on)."""
+        return self.actors + (1 if self.eval_every else 0)
+
     # -- checks ------------------------------------------------------------------------------
-    def validate(self) -> "Config":
+    def validate(self) -> Config:
         """Raise :class:`ConfigError` (one line) for an impossible configuration; return self."""
         for problem in _problems(self):
             raise ConfigError(problem)
         return self
 
-    def with_run_dir(self, now: Optional[float] = None) -> "Config":
+    def with_run_dir(self, now: Optional[float] = None) -> Config:
         """This config with ``run_dir`` filled in (``runs/<task>__<preset>__<seed>__<time>``)."""
         if self.run_dir is not None:
             return self
@@ -165,16 +173,16 @@ class Config:
             self, run_dir=f"runs/{self.task}__{self.preset}__{self.seed}__{stamp}")
 
     # -- json --------------------------------------------------------------------------------
-    def to_dict(self) -> Dict[str, Any]:
+    def to_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
 
-    def differences(self) -> Dict[str, Any]:
+    def differences(self) -> dict[str, Any]:
         """The settings in which this config differs from its preset, in field order."""
         preset = Config(**{**PRESETS.get(self.preset, {}), "preset": self.preset})
         return {name: value for name, value in self.to_dict().items()
                 if value != getattr(preset, name)}
 
-    def preset_differences(self) -> Dict[str, Any]:
+    def preset_differences(self) -> dict[str, Any]:
         """:meth:`differences` without the run folders (what config.json shows people)."""
         return {name: value for name, value in self.differences().items()
                 if name not in ("run_dir", "resume")}
@@ -185,7 +193,7 @@ class Config:
         Path(path).write_text(json.dumps(data, indent=2) + "\n")
 
     @classmethod
-    def from_dict(cls, data: Dict[str, Any], where: str = "config") -> "Config":
+    def from_dict(cls, data: dict[str, Any], where: str = "config") -> Config:
         if not isinstance(data, dict):
             raise ConfigError(f"{where}: expected a json object")
         data = {k: v for k, v in data.items() if k != DIFFERENCES_KEY}
@@ -204,7 +212,7 @@ class Config:
         return cls(**values)
 
     @classmethod
-    def from_json(cls, path) -> "Config":
+    def from_json(cls, path) -> Config:
         """Load a saved config; a missing, unreadable or corrupt file raises ConfigError."""
         path = Path(path)
         try:
@@ -217,7 +225,7 @@ class Config:
 
 
 # Named starting points; explicit flags override them.
-PRESETS: Dict[str, Dict[str, Any]] = {
+PRESETS: dict[str, dict[str, Any]] = {
     "paper": {},  # the study's configuration on two-room
     # Learns a small one-room on 2 CPU cores in minutes: high exploration from the Ape-X schedule
     # (actor 0 at 0.4; a random network alone barely moves), a faster learning rate and target
@@ -238,12 +246,14 @@ PRESETS: Dict[str, Dict[str, Any]] = {
     # - pre-fill 20,000 steps per actor and a 262,144-slot replay: the hour holds ~100k updates,
     #   not the study's 1e6, so the replay turns over in about the same number of updates;
     # - lr 1e-4, target sync every 1,000 updates, weights every 250: fewer updates to learn in;
-    # - the adaptive curriculum over two-room's phases 4 -> 1 (no undirected exploration found
+    # - the adaptive curriculum over two-room's phases 6 -> 1 (no undirected exploration found
     #   the full task's reward), with the evaluation actor on the full task every 500k steps;
-    #   30% of the episodes review a passed phase, so rewards keep flowing after a switch (without
-    #   it phase 2's return fell from 0.5 to 0.01 and the replay's rewards to 5e-4);
+    #   30% of the episodes review a passed phase, so rewards keep flowing after a switch
+    #   (without it the cleared-doorway phase's return fell from 0.5 to 0.01 and the replay's
+    #   rewards to 5e-4);
     # - a replay ratio of 0.05 updates per transition: the actors throttle to ~1,500 steps/s and
-    #   leave the learner its core (free-running, 0.007, phase 3 stayed below 0.4 for 35 min);
+    #   leave the learner its core (free-running, 0.007, the one-room phase stayed below 0.4
+    #   for 35 min);
     # - unstick: a random action after a step that left the frame unchanged (a greedy policy
     #   facing a wall otherwise repeats itself); it doubles the episodes that reach room 2.
     "cpu": {
@@ -259,8 +269,14 @@ PRESETS: Dict[str, Dict[str, Any]] = {
 
 # -- validation --------------------------------------------------------------------------------
 
-def _problems(c: Config) -> List[str]:
+def _problems(c: Config) -> list[str]:
     """Every impossible setting, as one-line messages (first one is raised)."""
+    return (_choice_problems(c) + _bound_problems(c) + _replay_problems(c) + _rate_problems(c)
+            + _task_problems(c))
+
+
+def _choice_problems(c: Config) -> list[str]:
+    """Named values that are not among their choices, and a missing optional package."""
     import importlib.util
 
     p = []
@@ -276,6 +292,12 @@ def _problems(c: Config) -> List[str]:
         p.append(f"--eval-task: unknown task {c.eval_task!r} (choose from {', '.join(TASKS)})")
     if c.preset not in PRESETS:
         p.append(f"--preset: unknown preset {c.preset!r} (choose from {', '.join(PRESETS)})")
+    return p
+
+
+def _bound_problems(c: Config) -> list[str]:
+    """Counts below their least value."""
+    p = []
     at_least = {"actors": 1, "envs_per_actor": 1, "n_step": 1, "batch_size": 1, "frame_stack": 1,
                 "history_len": 0, "prefill": 0, "updates": 1, "target_update_interval": 1,
                 "publish_interval": 1, "learner_queue": 1, "learner_threads": 0, "eval_every": 0,
@@ -287,7 +309,13 @@ def _problems(c: Config) -> List[str]:
             p.append(f"--{_flag(name)} must be at least {low}, got {getattr(c, name)}")
     if c.n_step > 254:  # the replay stores the bootstrap offset in one byte
         p.append(f"--n-step must be at most 254, got {c.n_step}")
-    streams = c.actors * c.envs_per_actor
+    return p
+
+
+def _replay_problems(c: Config) -> list[str]:
+    """A replay too small for the batch, the n-step windows or the writers' flushes."""
+    p = []
+    streams = c.num_streams
     if c.replay_capacity < c.batch_size:
         p.append(f"--replay-capacity {c.replay_capacity} is smaller than --batch-size "
                  f"{c.batch_size}")
@@ -299,6 +327,12 @@ def _problems(c: Config) -> List[str]:
                  f"{min_live_transitions(c)} sampleable transitions over {streams} actor "
                  f"environments (frames still being written are not sampleable), fewer than "
                  f"--batch-size {c.batch_size}")
+    return p
+
+
+def _rate_problems(c: Config) -> list[str]:
+    """Rates and exponents out of their ranges."""
+    p = []
     if not 0.0 < c.gamma <= 1.0:
         p.append(f"--gamma must be in (0, 1], got {c.gamma}")
     for name in ("epsilon", "eval_epsilon"):
@@ -320,6 +354,12 @@ def _problems(c: Config) -> List[str]:
         p.append(f"--max-grad-norm must be >= 0 (0 = off), got {c.max_grad_norm}")
     if c.replay_ratio is not None and not c.replay_ratio > 0:
         p.append(f"--replay-ratio must be positive, got {c.replay_ratio}")
+    return p
+
+
+def _task_problems(c: Config) -> list[str]:
+    """Task settings the environment or the curriculum cannot run."""
+    p = []
     if not 0 < c.room_size < math.inf:
         p.append(f"--room-size must be a positive finite number, got {c.room_size}")
     if c.max_episode_steps is not None and c.max_episode_steps < 1:
@@ -348,7 +388,7 @@ class _Parser(argparse.ArgumentParser):
         raise ConfigError(message)
 
 
-def _hints() -> Dict[str, Any]:
+def _hints() -> dict[str, Any]:
     return typing.get_type_hints(Config)
 
 
@@ -361,7 +401,7 @@ def _flag(name: str) -> str:
 
 
 def _is_tuple(hint) -> bool:
-    return typing.get_origin(hint) in (tuple, Tuple)
+    return typing.get_origin(hint) is tuple
 
 
 def _fits(value, hint) -> bool:
@@ -420,7 +460,7 @@ def build_parser() -> argparse.ArgumentParser:
             group = parser.add_argument_group(HELP_SECTIONS[f.name])
         hint, meta = hints[f.name], f.metadata
         helptext = f"{meta['help']} (default: {_show(f.default)})"
-        kwargs: Dict[str, Any] = {"help": helptext, "dest": f.name}
+        kwargs: dict[str, Any] = {"help": helptext, "dest": f.name}
         if hint is bool:
             kwargs["action"] = argparse.BooleanOptionalAction
         elif _is_tuple(hint):
@@ -437,7 +477,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def parse_args(argv: Optional[List[str]] = None) -> Config:
+def parse_args(argv: Optional[list[str]] = None) -> Config:
     """Command line -> validated Config (``run_dir`` still None unless given or resumed).
 
     Raises ConfigError (one line) for bad flags, an unknown preset or a missing/corrupt resume.
@@ -468,16 +508,22 @@ def parse_args(argv: Optional[List[str]] = None) -> Config:
 
 def min_live_transitions(c: Config) -> int:
     """Sampleable transitions in a full replay at worst: each environment's ring holds back up to
-    one writer flush (at most 64 steps) plus an n-step window and a frame stack of frames that
-    start no complete transition yet (NStepWriter)."""
-    streams = c.actors * c.envs_per_actor
+    one writer flush (at most FLUSH_EVERY steps) plus an n-step window and a frame stack of
+    frames that start no complete transition yet (NStepWriter)."""
+    streams = c.num_streams
     m = c.replay_capacity // streams
-    held_back = min(64, m - c.n_step - c.frame_stack) + c.n_step + c.frame_stack + 1
+    held_back = min(FLUSH_EVERY, m - c.n_step - c.frame_stack) + c.n_step + c.frame_stack + 1
     return streams * max(0, m - held_back)
 
 
 # Settings that shape the network: a resumed run must keep its checkpoint's.
 NETWORK_SHAPE = ("frame_stack", "history_len")
+
+
+def network_shape(cfg) -> dict[str, int]:
+    """The network's constructor arguments, from a Config or its saved dict (a checkpoint's)."""
+    values = cfg if isinstance(cfg, dict) else cfg.to_dict()
+    return {name: values[name] for name in NETWORK_SHAPE}
 
 
 def learner_threads(cfg: Config, cores: Optional[int] = None) -> int:
@@ -490,8 +536,7 @@ def learner_threads(cfg: Config, cores: Optional[int] = None) -> int:
 
     if cfg.learner_threads:
         return cfg.learner_threads
-    acting = cfg.actors + (1 if cfg.eval_every else 0)
-    return max(1, (cores or os.cpu_count() or 1) - acting)
+    return max(1, (cores or os.cpu_count() or 1) - cfg.acting_processes)
 
 
 def resolve_device(name: str):
@@ -549,9 +594,9 @@ def resolve_learner_precision(name: str, device) -> str:
     return "bfloat16" if native_bf16() else "float32"
 
 
-def to_argv(cfg: Config) -> List[str]:
+def to_argv(cfg: Config) -> list[str]:
     """Flags that :func:`parse_args` turns back into ``cfg`` (the preset plus what differs)."""
-    argv: List[str] = [] if cfg.preset == _field("preset").default else ["--preset", cfg.preset]
+    argv: list[str] = [] if cfg.preset == _field("preset").default else ["--preset", cfg.preset]
     for name, value in cfg.differences().items():
         if isinstance(value, bool):
             argv.append(f"--{'' if value else 'no-'}{_flag(name)}")

@@ -18,8 +18,16 @@ from pathlib import Path
 import numpy as np
 
 from dqn_mine.env.entities import KIT
-from dqn_mine.play import (add_episode_arguments, check_episode_settings, check_video_path,
-                           fill_env_settings, make_env, record, save_video)
+from dqn_mine.exitcodes import EXIT_BAD_INPUT
+from dqn_mine.play import (
+    add_episode_arguments,
+    check_episode_settings,
+    check_video_path,
+    fill_env_settings,
+    make_env,
+    record,
+)
+from dqn_mine.video import save_video
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -103,7 +111,7 @@ def main(argv=None) -> int:
         env = make_env(args)
     except ValueError as exc:  # bad settings, or CheckpointError (a ValueError)
         print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     try:
         scores = evaluate(env, agent, args.episodes, args.seed, progress=not args.quiet)
         if args.video:

@@ -6,8 +6,8 @@ import csv
 import math
 import time
 from collections import deque
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Dict, Iterable, Optional
 
 # What every run records; one row every `log_interval` updates (and at the end).
 COLUMNS = (
@@ -25,7 +25,7 @@ class MetricsTable:
     column against the update count, ``config`` as text); the CSV stays the source of truth.
     """
 
-    def __init__(self, path: Path, tensorboard_dir: Optional[Path] = None,
+    def __init__(self, path: Path, tensorboard_dir: Path | None = None,
                  config_text: str = ""):
         self._tb = None
         if tensorboard_dir is not None:
@@ -42,7 +42,7 @@ class MetricsTable:
             self._writer.writeheader()
             self._file.flush()
 
-    def write(self, row: Dict[str, float]) -> None:
+    def write(self, row: dict[str, float]) -> None:
         self._writer.writerow({k: _fmt(row.get(k)) for k in COLUMNS})
         self._file.flush()
         if self._tb is not None:
@@ -109,14 +109,14 @@ class RateMeter:
         return r
 
 
-def progress_postfix(row: Dict[str, float]) -> Dict[str, str]:
+def progress_postfix(row: dict[str, float]) -> dict[str, str]:
     """The few figures worth watching live in the tqdm bar."""
     keys = {"episode_return": "ret", "eval_return": "eval", "updates_per_s": "upd/s",
             "env_steps_per_s": "steps/s", "replay_ratio": "ratio", "loss": "loss",
             "phase": "phase"}
     out = {}
     for key, short in keys.items():
-        value: Optional[float] = row.get(key)
+        value: float | None = row.get(key)
         if value is None or (isinstance(value, float) and math.isnan(value)):
             continue
         if key == "phase" and not value:  # 0 = no curriculum: nothing to watch

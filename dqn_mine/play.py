@@ -17,6 +17,9 @@ from typing import Callable
 
 import numpy as np
 
+from dqn_mine.exitcodes import EXIT_BAD_INPUT
+from dqn_mine.video import mp4_available, save_video
+
 Policy = Callable[[object, np.ndarray, dict], int]
 
 
@@ -55,7 +58,7 @@ def fill_env_settings(args: argparse.Namespace) -> None:
     """Unset environment flags take the checkpoint's training settings, else the defaults."""
     trained = {}
     if args.checkpoint:
-        from dqn_mine.system import checkpoint as ckpt
+        from dqn_mine import checkpoint as ckpt
 
         trained = ckpt.load(args.checkpoint)["config"]
     for name, default in ENV_DEFAULTS.items():
@@ -101,41 +104,6 @@ def record(env, policy: Policy, seed: int,
             if terminated or truncated:
                 break
     return frames, total, steps
-
-
-def save_gif(frames: list[np.ndarray], path: Path, fps: float) -> None:
-    from PIL import Image
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    images = [Image.fromarray(f) for f in frames]
-    images[0].save(path, save_all=True, append_images=images[1:],
-                   duration=max(1, round(1000 / fps)), loop=0)
-
-
-def save_video(frames: list[np.ndarray], path: Path, fps: float) -> None:
-    """Frames with the map's legend below them, as a GIF or (with imageio-ffmpeg) an MP4."""
-    from dqn_mine.env.topdown import draw_legend
-
-    legend = draw_legend(frames[0].shape[1])
-    frames = [np.concatenate([f, legend]) for f in frames]
-    if path.suffix.lower() != ".mp4":
-        save_gif(frames, path, fps)
-        return
-    import imageio.v2 as imageio
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    # H.264 wants even sides: repeat the last row/column when a side is odd.
-    h, w = frames[0].shape[:2]
-    pad = ((0, h % 2), (0, w % 2), (0, 0))
-    with imageio.get_writer(path, fps=fps, macro_block_size=1) as writer:
-        for f in frames:
-            writer.append_data(np.pad(f, pad, mode="edge"))
-
-
-def mp4_available() -> bool:
-    import importlib.util
-
-    return all(importlib.util.find_spec(m) is not None for m in ("imageio", "imageio_ffmpeg"))
 
 
 def check_output_settings(args: argparse.Namespace, out: Path) -> None:
@@ -199,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
     args.policy = args.policy or ("agent" if args.checkpoint else "expert")
     if args.policy == "agent" and not args.checkpoint:
         print("error: --policy agent needs --checkpoint RUN_DIR", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     out = Path(args.out or f"runs/play/{args.policy}.gif")
     try:
         check_output_settings(args, out)
@@ -208,7 +176,7 @@ def main(argv: list[str] | None = None) -> int:
         policy = POLICIES[args.policy](args)
     except ValueError as exc:  # bad settings, or CheckpointError (a ValueError)
         print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     frames, total, steps = record(env, policy, args.seed, progress=not args.quiet)
     env.close()
     save_video(frames, out, args.fps)

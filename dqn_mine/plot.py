@@ -12,12 +12,12 @@ import argparse
 import math
 import sys
 from pathlib import Path
-from typing import List, Optional
 
+from dqn_mine.exitcodes import EXIT_BAD_INPUT
 from dqn_mine.metrics import read_metrics
 
 
-def load_run(run_dir: Path) -> List[dict]:
+def load_run(run_dir: Path) -> list[dict]:
     """The metrics rows of a run folder; a one-line ValueError when there are none."""
     path = Path(run_dir) / "metrics.csv"
     if not path.is_file():
@@ -28,11 +28,11 @@ def load_run(run_dir: Path) -> List[dict]:
     return rows
 
 
-def column(rows: List[dict], name: str) -> List[float]:
+def column(rows: list[dict], name: str) -> list[float]:
     return [r.get(name, math.nan) for r in rows]
 
 
-def has_values(rows: List[dict], name: str) -> bool:
+def has_values(rows: list[dict], name: str) -> bool:
     return any(not math.isnan(v) for v in column(rows, name))
 
 
@@ -77,7 +77,7 @@ def plot_runs(runs: dict, out: Path) -> Path:
     return out
 
 
-def main(argv: Optional[List[str]] = None) -> int:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m dqn_mine.plot",
                                  description=__doc__.split("\n\n")[0])
     ap.add_argument("runs", nargs="+", help="run folders (each with metrics.csv)")
@@ -88,10 +88,10 @@ def main(argv: Optional[List[str]] = None) -> int:
         import matplotlib  # noqa: F401
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     except ImportError:
         print("error: plotting needs matplotlib: pip install -e .[plot]", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     out = plot_runs(runs, Path(args.out) if args.out else Path(args.runs[0]) / "curves.png")
     print(f"wrote {out}")
     return 0

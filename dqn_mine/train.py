@@ -15,20 +15,20 @@ from __future__ import annotations
 import dataclasses
 import json
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Optional, Sequence, Tuple
 
+from dqn_mine import checkpoint as ckpt
+from dqn_mine.checkpoint import CheckpointError
 from dqn_mine.config import Config, ConfigError, parse_args, resolve_device
-from dqn_mine.system import checkpoint as ckpt
-from dqn_mine.system.checkpoint import CheckpointError
-from dqn_mine.system.shared import SharedMemoryError, check_free_space
+from dqn_mine.exitcodes import EXIT_BAD_INPUT, EXIT_INTERRUPTED
+from dqn_mine.shared import SharedMemoryError, check_free_space
 
 PROG = "dqn_mine.train"
 
 
 def check_shared_memory(cfg: Config) -> None:
     """Fail before anything is written if the replay cannot fit in /dev/shm."""
-    from dqn_mine.replay import ReplayLayout  # noqa: F401  (imported for its cost up front)
     from dqn_mine.system.layout import replay_layout
 
     check_free_space(replay_layout(cfg).nbytes)
@@ -37,7 +37,7 @@ def check_shared_memory(cfg: Config) -> None:
 def check_env_settings(cfg: Config) -> None:
     """Let the environment judge its own arguments (it creates no GL context until it renders)."""
     from dqn_mine.env import MineRescueEnv
-    from dqn_mine.system.actor import actor_specs
+    from dqn_mine.system.specs import actor_specs
 
     for spec in actor_specs(cfg)[-1:] + actor_specs(cfg)[:1]:
         try:
@@ -60,7 +60,7 @@ def check_saved_replay(cfg: Config) -> None:
             raise ConfigError(str(exc)) from None
 
 
-def open_run(cfg: Config) -> Tuple[Config, Path, Optional[dict]]:
+def open_run(cfg: Config) -> tuple[Config, Path, dict | None]:
     """Validate everything that can fail, then create (or reuse) the run folder."""
     # parse_args already rebuilt a resumed run's config from its config.json.
     state = ckpt.load(cfg.resume) if cfg.resume else None
@@ -87,11 +87,11 @@ def report(summary) -> None:
           f"{s.episode_return:.3f} | {s.updates_per_s:.1f} upd/s while training | "
           f"{s.env_steps_per_s:.0f} steps/s | replay ratio {s.replay_ratio:.3f}")
     print(f"  run folder {s.run_dir} (config.json, metrics.csv, checkpoint.pt)")
-    if s.exit_code == 130:
+    if s.exit_code == EXIT_INTERRUPTED:
         print(f"  resume with: python -m {PROG} --resume {s.run_dir}")
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     from dqn_mine.system.runner import Run
 
     try:
@@ -99,7 +99,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         cfg, run_dir, state = open_run(cfg)
     except (ConfigError, CheckpointError, SharedMemoryError) as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     summary = Run(cfg, run_dir, state, serial=cfg.serial, progress=cfg.progress).execute()
     (run_dir / "summary.json").write_text(json.dumps(dataclasses.asdict(summary), indent=2))
     report(summary)

@@ -17,10 +17,11 @@ from __future__ import annotations
 import argparse
 import shlex
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import List, Optional, Sequence
 
 from dqn_mine.config import ConfigError
+from dqn_mine.exitcodes import EXIT_BAD_INPUT
 from experiments.grid import SCALES, grid_names, load_grid
 from experiments.launcher import EXIT_INTERRUPTED, Sweep, run_state, sweep_exit_code, train_command
 from experiments.report import build_report
@@ -66,7 +67,7 @@ def resolve_scale(scale: str) -> str:
     return "paper" if torch.cuda.is_available() else "quick"
 
 
-def seeds_of(args, grid) -> List[int]:
+def seeds_of(args, grid) -> list[int]:
     if args.seed_list is not None:
         return list(dict.fromkeys(args.seed_list))   # a seed given twice is one run
     n = grid.default_seeds(args.scale) if args.seeds is None else args.seeds
@@ -85,7 +86,7 @@ def cmd_list() -> int:
     return 0
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
         if args.command == "list":
@@ -97,7 +98,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         specs = grid.expand(args.scale, out, seeds)
     except ConfigError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     command = f"{PROG} run {grid.name} --scale {args.scale} --seed-list " \
               f"{' '.join(map(str, seeds))} --out {shlex.quote(str(out))}"
     conflicts = [f"{spec.label}: {state}" for spec in specs
@@ -106,12 +107,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         # Most often another scale's sweep in the same folder: a report would mislabel it.
         print(f"{PROG}: error: {out} holds runs with other settings than {grid.name} at scale "
               f"{args.scale} ({conflicts[0]}); give --scale or --out", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     if args.command == "report":
         if not out.is_dir():
             print(f"{PROG}: error: no sweep at {out} (run it first, or give --out)",
                   file=sys.stderr)
-            return 2
+            return EXIT_BAD_INPUT
         print(f"{PROG}: wrote {build_report(grid, args.scale, out, seeds, command)}")
         return 0
     if args.dry_run:

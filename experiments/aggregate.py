@@ -21,9 +21,9 @@ from __future__ import annotations
 import csv
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
@@ -45,7 +45,7 @@ class SeedRun:
 
     config: str
     seed: int
-    columns: Dict[str, np.ndarray]
+    columns: dict[str, np.ndarray]
     summary: dict
 
     @property
@@ -65,7 +65,7 @@ class Curve:
     n: int
 
 
-def load_run(run_dir: Path, config: str, seed: int) -> Optional[SeedRun]:
+def load_run(run_dir: Path, config: str, seed: int) -> SeedRun | None:
     """The run's metrics (None if it has no rows yet). A resumed run may repeat updates that
     were logged after its last checkpoint: the later row wins."""
     path = Path(run_dir) / "metrics.csv"
@@ -84,9 +84,9 @@ def load_run(run_dir: Path, config: str, seed: int) -> Optional[SeedRun]:
     return SeedRun(config, seed, columns, summary)
 
 
-def load_runs(out: Path, configs: Sequence[str], seeds: Sequence[int]) -> Dict[str, List[SeedRun]]:
+def load_runs(out: Path, configs: Sequence[str], seeds: Sequence[int]) -> dict[str, list[SeedRun]]:
     """``{config: [SeedRun, ...]}`` for the runs under ``out/<config>/seed<k>`` that have data."""
-    found: Dict[str, List[SeedRun]] = {}
+    found: dict[str, list[SeedRun]] = {}
     for name in configs:
         runs = [load_run(Path(out) / name / f"seed{s}", name, s) for s in seeds]
         found[name] = [r for r in runs if r is not None]
@@ -98,7 +98,7 @@ def last_finite(values: np.ndarray) -> float:
     return float(finite[-1]) if finite.size else math.nan
 
 
-def early_value(run: "SeedRun", col: str = "episode_return", share: float = 0.25) -> float:
+def early_value(run: SeedRun, col: str = "episode_return", share: float = 0.25) -> float:
     """``col`` at the first row at or after ``share`` of the run's last update."""
     updates, values = run.columns["update"], run.columns[col]
     ok = np.isfinite(updates) & np.isfinite(values)
@@ -118,7 +118,7 @@ def _mean(values: Sequence[float]) -> float:
     return sum(finite) / len(finite) if finite else math.nan
 
 
-def _stats(values: Sequence[float]) -> Dict[str, float]:
+def _stats(values: Sequence[float]) -> dict[str, float]:
     v = np.array([x for x in values if math.isfinite(x)], dtype=float)
     if not v.size:
         return {"mean": math.nan, "std": math.nan, "min": math.nan, "max": math.nan}
@@ -149,9 +149,9 @@ def curve(runs: Sequence[SeedRun], x: str, y: str, points: int = 100) -> Curve:
     return align([r.columns[x] for r in runs], [r.columns[y] for r in runs], points)
 
 
-def summarize_config(name: str, settings: str, runs: Sequence[SeedRun]) -> Dict[str, object]:
+def summarize_config(name: str, settings: str, runs: Sequence[SeedRun]) -> dict[str, object]:
     """One summary.csv row (see the module docstring for each definition)."""
-    row: Dict[str, object] = {"config": name, "settings": settings, "seeds": len(runs),
+    row: dict[str, object] = {"config": name, "settings": settings, "seeds": len(runs),
                               "finished": sum(r.finished for r in runs)}
     row["updates"] = _mean([last_finite(r.columns["update"]) for r in runs])
     row["wall_time_s"] = _mean([last_finite(r.columns["wall_time"]) for r in runs])
@@ -169,7 +169,7 @@ def summarize_config(name: str, settings: str, runs: Sequence[SeedRun]) -> Dict[
     return row
 
 
-def write_summary(rows: Sequence[Dict[str, object]], path: Path) -> None:
+def write_summary(rows: Sequence[dict[str, object]], path: Path) -> None:
     with open(path, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=SUMMARY_COLUMNS)
         writer.writeheader()

@@ -26,9 +26,10 @@ import dataclasses
 import importlib
 import importlib.util
 import pkgutil
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any
 
 from dqn_mine.config import PRESETS, Config, ConfigError, to_argv
 
@@ -64,13 +65,13 @@ class RunSpec:
     def label(self) -> str:
         return f"{self.config_name}/seed{self.seed}"
 
-    def argv(self) -> List[str]:
+    def argv(self) -> list[str]:
         """Flags of ``python -m dqn_mine.train`` for a fresh start."""
         return to_argv(self.cfg)
 
     def processes(self) -> int:
         """Busy processes while it runs: actors, the evaluation actor, the learner."""
-        return self.cfg.actors + (1 if self.cfg.eval_every else 0) + 1
+        return self.cfg.acting_processes + 1
 
 
 @dataclass(frozen=True)
@@ -79,26 +80,26 @@ class Grid:
 
     name: str
     title: str
-    configs: Dict[str, Dict[str, Any]]
-    base: Dict[str, Any]
-    scales: Dict[str, Dict[str, Any]]
+    configs: dict[str, dict[str, Any]]
+    base: dict[str, Any]
+    scales: dict[str, dict[str, Any]]
     metric: str = "episode_return"
     finding: str = ""
-    claims: Tuple[Claim, ...] = ()
-    extra_plots: Tuple[str, ...] = ()
+    claims: tuple[Claim, ...] = ()
+    extra_plots: tuple[str, ...] = ()
 
-    def scale(self, scale: str) -> Dict[str, Any]:
+    def scale(self, scale: str) -> dict[str, Any]:
         if scale not in SCALES:
             raise ConfigError(f"unknown scale {scale!r} (choose from {', '.join(SCALES)})")
         return self.scales.get(scale, {})
 
-    def config_names(self, scale: str) -> List[str]:
+    def config_names(self, scale: str) -> list[str]:
         return list(self.scale(scale).get("configs", self.configs))
 
     def default_seeds(self, scale: str) -> int:
         return int(self.scale(scale).get("seeds", 1))
 
-    def overrides(self, name: str, scale: str) -> Dict[str, Any]:
+    def overrides(self, name: str, scale: str) -> dict[str, Any]:
         """The Config fields of configuration ``name`` at ``scale`` (precedence as documented)."""
         s = self.scale(scale)
         return {**self.base, **s.get("base", {}), **self.configs[name],
@@ -119,14 +120,14 @@ class Grid:
         except ConfigError as exc:
             raise ConfigError(f"grid {self.name}, {name} at scale {scale}: {exc}") from None
 
-    def expand(self, scale: str, out: Path, seeds: Optional[Sequence[int]] = None) -> List[RunSpec]:
+    def expand(self, scale: str, out: Path, seeds: Sequence[int] | None = None) -> list[RunSpec]:
         """Every run, configuration-major: ``OUT/<config>/seed<k>``."""
         seeds = list(range(self.default_seeds(scale))) if seeds is None else list(seeds)
         return [RunSpec(name, s, self.config(name, scale, s, Path(out) / name / f"seed{s}"))
                 for name in self.config_names(scale) for s in seeds]
 
 
-def grid_names() -> List[str]:
+def grid_names() -> list[str]:
     from experiments import grids
 
     return sorted(m.name for m in pkgutil.iter_modules(grids.__path__) if not m.ispkg)

@@ -28,14 +28,14 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
 
 from dqn_mine.config import Config, ConfigError
+from dqn_mine.exitcodes import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from experiments.grid import RunSpec
 
-EXIT_OK, EXIT_FAILED, EXIT_INTERRUPTED = 0, 1, 130
 LOG = "train.log"
 # Settings a resume may change without making it another run.
 RESUMABLE = {"updates", "resume", "run_dir", "progress"}
@@ -56,7 +56,7 @@ def run_state(spec: RunSpec) -> str:
     return "resume" if (d / "checkpoint.pt").exists() else "restart"
 
 
-def _read_json(path: Path) -> Optional[dict]:
+def _read_json(path: Path) -> dict | None:
     try:
         return json.loads(path.read_text())
     except (OSError, ValueError):
@@ -77,7 +77,7 @@ def _differs(spec: RunSpec) -> str:
     return f"{spec.run_dir} holds another configuration ({shown}); use another OUT or delete it"
 
 
-def train_command(spec: RunSpec, state: str) -> List[str]:
+def train_command(spec: RunSpec, state: str) -> list[str]:
     base = [sys.executable, "-m", "dqn_mine.train"]
     if state == "resume":
         return base + ["--resume", str(spec.run_dir), "--updates", str(spec.cfg.updates),
@@ -89,7 +89,7 @@ def train_command(spec: RunSpec, state: str) -> List[str]:
 class Outcome:
     spec: RunSpec
     state: str  # what the launcher found (see run_state)
-    exit_code: Optional[int] = None  # None: not run (complete, conflict, or never started)
+    exit_code: int | None = None  # None: not run (complete, conflict, or never started)
     seconds: float = 0.0
 
 
@@ -107,13 +107,13 @@ class Sweep:
     """Runs ``specs`` (``jobs`` at a time, at most ``cores`` busy processes unless a single run
     alone needs more) and returns one :class:`Outcome` per spec."""
 
-    def __init__(self, specs: Sequence[RunSpec], jobs: int = 1, cores: Optional[int] = None,
+    def __init__(self, specs: Sequence[RunSpec], jobs: int = 1, cores: int | None = None,
                  progress: bool = True, echo=print):
         self.specs, self.jobs = list(specs), max(1, jobs)
         self.cores = cores or os.cpu_count() or 1
         self.progress, self.echo = progress, echo
-        self.stop_signal: Optional[int] = None
-        self.running: List[_Running] = []
+        self.stop_signal: int | None = None
+        self.running: list[_Running] = []
 
     # -- signals -----------------------------------------------------------------------------
     def _on_signal(self, signum, frame) -> None:
@@ -125,10 +125,10 @@ class Sweep:
             self.echo(f"\n{signal.Signals(signum).name}: stopping the running trainers "
                       "(they write a checkpoint); run the same command again to continue")
 
-    def run(self) -> List[Outcome]:
+    def run(self) -> list[Outcome]:
         from tqdm import tqdm
 
-        outcomes: Dict[int, Outcome] = {}
+        outcomes: dict[int, Outcome] = {}
         pending = []
         for i, spec in enumerate(self.specs):
             state = run_state(spec)
@@ -186,12 +186,14 @@ class Sweep:
     def _finish(self, r: _Running) -> Outcome:
         code, seconds = r.proc.returncode, time.monotonic() - r.started
         summary = _read_json(r.spec.run_dir / "summary.json") or {}
-        what = {0: "finished", 130: "interrupted", 2: "bad input"}.get(code, "FAILED")
+        what = {EXIT_OK: "finished", EXIT_INTERRUPTED: "interrupted",
+                EXIT_BAD_INPUT: "bad input"}.get(code, "FAILED")
         ret = summary.get("episode_return")
         ret_text = f", mean return {ret:.3f}" if isinstance(ret, float) and ret == ret else ""
         self.echo(f"{r.spec.label}: {what} (exit {code}) after {summary.get('updates', '?')} "
                   f"updates in {seconds:.0f} s{ret_text}"
-                  + ("" if code in (0, 130) else f"; see {r.spec.run_dir / LOG}"))
+                  + ("" if code in (EXIT_OK, EXIT_INTERRUPTED)
+                     else f"; see {r.spec.run_dir / LOG}"))
         return Outcome(r.spec, r.state, code, seconds)
 
 

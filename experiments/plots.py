@@ -4,8 +4,8 @@ across seeds, and a bar chart of updates per second."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Dict, List, Sequence
 
 from experiments.aggregate import SeedRun, curve
 
@@ -29,7 +29,7 @@ def _pyplot():
     return plt
 
 
-def curves_png(runs: Dict[str, List[SeedRun]], x: str, y: str, title: str, path: Path) -> bool:
+def curves_png(runs: dict[str, list[SeedRun]], x: str, y: str, title: str, path: Path) -> bool:
     """One line per configuration (mean over seeds) with its min-max band; False if no data."""
     curves = {name: curve(rs, x, y) for name, rs in runs.items() if rs}
     curves = {k: c for k, c in curves.items() if c.x.size}

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple
 
 from experiments.aggregate import (
     SUMMARY_COLUMNS,
@@ -35,7 +35,7 @@ def _value(v) -> str:
     return " ".join(map(str, v)) if isinstance(v, tuple) else str(v)
 
 
-def check_claim(claim: Claim, rows: Dict[str, dict]) -> Tuple[Optional[bool], float, float]:
+def check_claim(claim: Claim, rows: dict[str, dict]) -> tuple[bool | None, float, float]:
     """(agrees?, value of a, value of b); agrees is None when either value is missing."""
     a = rows.get(claim.a, {}).get(claim.column, math.nan)
     b = rows.get(claim.b, {}).get(claim.column, math.nan)
@@ -59,8 +59,8 @@ def build_report(grid: Grid, scale: str, out: Path, seeds: Sequence[int],
     return out / "report.md"
 
 
-def make_plots(grid: Grid, runs: Dict[str, List[SeedRun]], rows: List[dict],
-               out: Path) -> List[Tuple[str, str]]:
+def make_plots(grid: Grid, runs: dict[str, list[SeedRun]], rows: list[dict],
+               out: Path) -> list[tuple[str, str]]:
     """(file, caption) of every PNG written; none if matplotlib is missing."""
     try:
         from experiments import plots
@@ -104,8 +104,8 @@ def _final_cell(row: dict, key: str) -> str:
     return text
 
 
-def render(grid: Grid, scale: str, seeds: Sequence[int], rows: List[dict],
-           pngs: List[Tuple[str, str]], command: str) -> str:
+def render(grid: Grid, scale: str, seeds: Sequence[int], rows: list[dict],
+           pngs: list[tuple[str, str]], command: str) -> str:
     note = grid.scale(scale).get("note", "")
     eval_col = grid.metric == "eval_return"
     lines = [f"# {grid.title}", "",

@@ -4,16 +4,16 @@ import contextlib
 import dataclasses
 
 import numpy as np
-
 import torch
 
 from dqn_mine.agent.network import DuelingQNetwork
 from dqn_mine.config import PRESETS, Config
 from dqn_mine.replay import ReplayStorage
-from dqn_mine.system.actor import Actor, actor_specs
+from dqn_mine.shared import SharedBlocks
+from dqn_mine.system.actor import Actor
 from dqn_mine.system.control import Control
 from dqn_mine.system.layout import replay_layout, run_block_specs
-from dqn_mine.system.shared import SharedBlocks
+from dqn_mine.system.specs import actor_specs
 from dqn_mine.system.weights import WeightBroadcast
 
 
@@ -42,11 +42,12 @@ def test_bfloat16_actor_acts_on_the_published_weights():
         assert {p.dtype for p in actor.net.parameters()} == {torch.bfloat16}
         for _ in range(30):
             actor.step()
-        q = actor.q_values(actor.stacks, actor.histories, actor.carrying)      # [E, A]
+        core = actor.core
+        q = core.q_values()                                                    # [E, A]
         with torch.inference_mode():
-            expected = learner_net(torch.from_numpy(actor.stacks),
-                                   torch.from_numpy(actor.histories),
-                                   torch.from_numpy(actor.carrying)).numpy()
+            expected = learner_net(torch.from_numpy(core.stacks),
+                                   torch.from_numpy(core.histories),
+                                   torch.from_numpy(core.carrying)).numpy()
         assert q.dtype == expected.dtype and q.shape == (2, 6)
         assert abs(q - expected).max() < 0.02 * abs(expected).max()
         assert actor.steps == 60
@@ -67,12 +68,13 @@ def test_ez_actor_holds_random_motions_with_one_rate_per_env():
     assert rates == [epsilon_for_actor(k, 6) for k in range(6)]
     net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
     with in_process_actor(cfg, net, specs[0]) as actor:
-        assert actor.explorer.durations
-        assert list(actor.explorer.epsilon) == rates[:3]
+        explorer = actor.core.explorer
+        assert explorer.durations
+        assert list(explorer.epsilon) == rates[:3]
         held = 0
         for _ in range(200):
             actor.step()
-            held += int((actor.explorer.left > 0).sum())
+            held += int((explorer.left > 0).sum())
         assert held > 0, "env 0 (epsilon 0.4) must start runs that last several steps"
         assert actor.steps == 600
 
@@ -89,12 +91,12 @@ def _noop_network(cfg) -> DuelingQNetwork:
 
 def _actions_taken(cfg, steps: int):
     with in_process_actor(cfg, _noop_network(cfg)) as actor:
-        actor.explorer.epsilon[:] = 0.0
+        actor.core.explorer.epsilon[:] = 0.0
         taken, stuck = [], []
         for _ in range(steps):
             actor.step()
-            taken.append(actor.histories[:, -1].copy())    # the action each env just took
-            stuck.append(actor.stuck.copy())
+            taken.append(actor.core.histories[:, -1].copy())    # each env's last action
+            stuck.append(actor.core.stuck.copy())
         return np.array(taken), np.array(stuck)            # [T, E]
 
 

@@ -8,8 +8,16 @@ import pytest
 import torch
 from torch import nn
 
-from dqn_mine.agent.learning import (DQNUpdater, TensorBatch, batch_to_device, double_dqn_target,
-                                     epsilon_for_actor, epsilon_greedy, nstep_return, td_loss)
+from dqn_mine.agent.learning import (
+    DQNUpdater,
+    TensorBatch,
+    batch_to_device,
+    double_dqn_target,
+    epsilon_for_actor,
+    epsilon_greedy,
+    nstep_return,
+    td_loss,
+)
 from dqn_mine.agent.network import DuelingQNetwork
 from dqn_mine.replay import Batch
 

@@ -8,8 +8,17 @@ import numpy as np
 import pytest
 import torch
 
-from dqn_mine.config import (PRESETS, Config, ConfigError, build_parser, native_bf16,
-                             parse_args, resolve_actor_precision, resolve_device, to_argv)
+from dqn_mine.config import (
+    PRESETS,
+    Config,
+    ConfigError,
+    build_parser,
+    native_bf16,
+    parse_args,
+    resolve_actor_precision,
+    resolve_device,
+    to_argv,
+)
 
 
 def test_defaults_are_the_studys():
@@ -178,8 +187,8 @@ def test_live_transitions_bound_is_what_a_full_replay_holds():
     count the transitions the sampler could draw after every step."""
     from dqn_mine.config import min_live_transitions
     from dqn_mine.replay import NStepWriter, PrioritizedReplay, ReplayStorage
+    from dqn_mine.shared import SharedBlocks
     from dqn_mine.system.layout import replay_layout
-    from dqn_mine.system.shared import SharedBlocks
 
     cfg = parse_args(["--actors", "1", "--replay-capacity", "200", "--batch-size", "8"])
     layout = replay_layout(cfg)

@@ -1,4 +1,5 @@
-"""Curriculum state, room-count schedule and the evaluation actor, through real runs."""
+"""The curriculum on its own, then its state, the room-count schedule and the evaluation actor
+through real runs."""
 
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ from pathlib import Path
 import pytest
 
 from dqn_mine.config import parse_args
-from dqn_mine.system.actor import actor_specs, eval_env_kwargs, initial_phase, review_phase
+from dqn_mine.system.curriculum import Curriculum
+from dqn_mine.system.specs import actor_specs, eval_env_kwargs
 
 ROOT = Path(__file__).resolve().parents[1]
 FAST = ["--actors", "2", "--prefill", "100", "--replay-capacity", "4096", "--log-interval", "10",
@@ -27,6 +29,70 @@ def run(*args: str) -> list:
         return list(csv.DictReader(f))
 
 
+# -- the Curriculum object alone --------------------------------------------------------------
+def test_adaptive_curriculum_starts_easiest_and_advances_one_phase_per_full_window():
+    cfg = parse_args(["--task", "three-room", "--curriculum", "adaptive",
+                      "--curriculum-window", "3", "--curriculum-threshold", "0.5"])
+    cur = Curriculum(cfg)
+    assert (cur.phase, cur.num_rooms, cur.logged_phase) == (6, None, 6)
+    for ret in (1.0, 1.0):
+        cur.record(6, ret)
+    cur.advance(updates=10)
+    assert cur.phase == 6, "the window is not full yet"
+    cur.record(5, 1.0)             # a reviewed (easier) phase's episode does not count
+    cur.advance(updates=20)
+    assert cur.phase == 6 and len(cur.returns) == 2
+    for ret in (1.0, 1.0, 1.0, 1.0):   # a batch of episodes: one advance at most
+        cur.record(6, ret)
+    cur.advance(updates=30)
+    assert cur.phase == 5 and len(cur.returns) == 0 and cur.logged_phase == 5
+    for _ in range(3):
+        cur.record(5, 0.5)         # the mean must exceed the threshold, not reach it
+    cur.advance(updates=40)
+    assert cur.phase == 5 and cur.phase_return == 0.5
+
+
+def test_adaptive_curriculum_stops_at_the_full_task_and_resumes_where_it_was():
+    cfg = parse_args(["--curriculum", "adaptive", "--curriculum-window", "1",
+                      "--curriculum-threshold", "-1"])              # two-room: phases 6..1
+    cur = Curriculum(cfg)
+    seen = []
+    for _ in range(8):
+        cur.record(cur.phase, 0.0)
+        cur.advance(updates=0)
+        seen.append(cur.phase)
+    assert seen == [5, 4, 3, 2, 1, 1, 1, 1]
+    assert Curriculum(cfg, phase=3).phase == 3
+
+
+def test_room_schedule_follows_the_share_of_updates():
+    cfg = parse_args(["--task", "rooms", "--curriculum", "schedule", "--rooms-schedule", "2", "3",
+                      "4", "--updates", "90"])
+    cur = Curriculum(cfg)
+    assert (cur.num_rooms, cur.phase, cur.logged_phase) == (2, 0, 2)
+    rooms = []
+    for updates in (10, 29, 30, 59, 60, 90, 500):
+        cur.advance(updates)
+        rooms.append(cur.num_rooms)
+    assert rooms == [2, 2, 3, 3, 4, 4, 4]
+    assert Curriculum(cfg, updates=45).num_rooms == 3        # a resumed run's position
+    assert math.isnan(cur.phase_return)
+
+
+def test_episode_start_tells_the_environment_what_to_set():
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    adaptive = Curriculum(parse_args(["--curriculum", "adaptive"]))
+    assert adaptive.episode_start(3, 0, rng) == (3, {"phase": 3})
+    rooms = Curriculum(parse_args(["--task", "rooms", "--curriculum", "schedule"]))
+    assert rooms.episode_start(0, 4, rng) == (0, {"num_rooms": 4})
+    plain = Curriculum(parse_args([]))
+    assert plain.episode_start(0, 0, rng) == (0, {}) and plain.phase == 0
+    assert plain.num_rooms is None
+
+
+# -- through real runs -------------------------------------------------------------------------
 def test_phases_advance_through_shared_state(tmp_path):
     """A threshold every episode beats moves the phase from 6 to 1; the actors follow it
     (each phase gets its own window of episodes, all started in that phase)."""
@@ -43,14 +109,15 @@ def test_review_starts_a_share_of_episodes_in_easier_phases():
 
     cfg = parse_args(["--curriculum", "adaptive", "--curriculum-review", "0.3"])   # two-room
     rng = np.random.default_rng(0)
-    drawn = np.array([review_phase(cfg, 4, rng) for _ in range(20_000)])
+    drawn = np.array([Curriculum(cfg).review_phase(4, rng) for _ in range(20_000)])
     shares = [np.mean(drawn == p) for p in (1, 2, 3, 4, 5, 6)]
     assert shares[0] == shares[1] == shares[2] == 0 and abs(shares[3] - 0.7) < 0.015
     assert abs(shares[4] - 0.15) < 0.01 and abs(shares[5] - 0.15) < 0.01
-    assert {review_phase(cfg, 6, rng) for _ in range(100)} == {6}   # nothing easier to review
+    # nothing easier to review
+    assert {Curriculum(cfg).review_phase(6, rng) for _ in range(100)} == {6}
     study = parse_args(["--curriculum", "adaptive"])
     state = rng.bit_generator.state
-    assert {review_phase(study, 2, rng) for _ in range(100)} == {2}
+    assert {Curriculum(study).review_phase(2, rng) for _ in range(100)} == {2}
     assert rng.bit_generator.state == state, "without review no random number is drawn"
 
 
@@ -97,12 +164,12 @@ def test_evaluation_actor_runs_the_full_target_task():
     assert all(s.env_kwargs["randomise_visuals"] for s in specs[:-1])
     adaptive = parse_args(["--task", "three-room", "--curriculum", "adaptive",
                            "--eval-every", "1000"])
-    assert initial_phase(adaptive) == 6 and not actor_specs(adaptive)[-1].follows_curriculum
+    assert Curriculum(adaptive).phase == 6 and not actor_specs(adaptive)[-1].follows_curriculum
     two = parse_args(["--curriculum", "adaptive", "--eval-every", "1000"])   # two-room
-    assert initial_phase(two) == 6 and eval_env_kwargs(two)["task"] == "two-room"
+    assert Curriculum(two).phase == 6 and eval_env_kwargs(two)["task"] == "two-room"
     rooms = parse_args(["--task", "rooms", "--curriculum", "schedule", "--rooms-schedule", "3", "4",
                         "5", "--eval-every", "1000"])
-    assert eval_env_kwargs(rooms)["num_rooms"] == 5 and initial_phase(rooms) == 3
+    assert eval_env_kwargs(rooms)["num_rooms"] == 5 and Curriculum(rooms).num_rooms == 3
 
 
 @pytest.mark.parametrize("value", [math.nan])

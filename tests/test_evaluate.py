@@ -70,7 +70,8 @@ def test_load_agent_plays_an_episode_like_the_readme(run_dir):
         actions.append(episode)
     env.close()
     assert actions[0] == actions[1]          # greedy, same seed: the same episode
-    assert agent.history.dtype == np.int8 and len(agent.history) == 20
+    history = agent.core.histories[0]           # what the network was fed last
+    assert history.dtype == np.int8 and len(history) == 20
 
 
 def test_outcomes_say_what_the_agent_held_at_the_end():

@@ -9,7 +9,7 @@ import pytest
 
 from dqn_mine.replay import NStepWriter, PrioritizedReplay, ReplayLayout, ReplayStorage
 from dqn_mine.replay.storage import CURSOR, PUBLISHED
-from dqn_mine.system.shared import SharedBlocks, leftover_segments
+from dqn_mine.shared import SharedBlocks, leftover_segments
 
 GAMMA, N = 0.9, 3
 STREAMS_PER_ACTOR, ACTORS, STEPS = 2, 3, 3000

@@ -3,10 +3,16 @@
 import numpy as np
 import pytest
 
-from dqn_mine.replay import Batch, NStepWriter, PrioritizedReplay, ReplayLayout, ReplayStorage, \
-    beta_at
+from dqn_mine.replay import (
+    Batch,
+    NStepWriter,
+    PrioritizedReplay,
+    ReplayLayout,
+    ReplayStorage,
+    beta_at,
+)
 from dqn_mine.replay.storage import CURSOR, PUBLISHED
-from dqn_mine.system.shared import SharedBlocks
+from dqn_mine.shared import SharedBlocks
 
 
 @pytest.fixture

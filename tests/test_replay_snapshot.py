@@ -5,7 +5,7 @@ import pytest
 
 from dqn_mine.replay import NStepWriter, PrioritizedReplay, ReplayLayout, ReplayStorage, snapshot
 from dqn_mine.replay.storage import BLOCK_NAMES, CURSOR
-from dqn_mine.system.shared import SharedBlocks
+from dqn_mine.shared import SharedBlocks
 
 LAYOUT = ReplayLayout(num_streams=2, stream_capacity=64, frame_shape=(3, 4, 5), history_len=3,
                       n_step=3, gamma=0.9)
@@ -17,7 +17,7 @@ def fill(storage, steps, seed=0):
     for stream in range(storage.layout.num_streams):
         w = NStepWriter(storage, stream, flush_every=8)
         w.begin_episode(rng.integers(0, 255, (3, 4, 5), np.uint8), 0.0)
-        for t in range(steps):
+        for _t in range(steps):
             end = rng.random() < 0.05
             w.append(rng.normal(size=6).astype(np.float32), int(rng.integers(6)),
                      float(end), rng.integers(0, 255, (3, 4, 5), np.uint8),

@@ -9,7 +9,7 @@ import pytest
 
 from dqn_mine.replay import NStepWriter, PrioritizedReplay, ReplayLayout, ReplayStorage
 from dqn_mine.replay.storage import CURSOR, PUBLISHED, STEPS
-from dqn_mine.system.shared import SharedBlocks, leftover_segments
+from dqn_mine.shared import SharedBlocks, leftover_segments
 
 GAMMA = 0.5
 

@@ -1,4 +1,4 @@
-"""dqn_mine.system.shared: allocation, attachment from spawned processes, cleanup, free space."""
+"""dqn_mine.shared: allocation, attachment from spawned processes, cleanup, free space."""
 
 import multiprocessing as mp
 import os
@@ -8,8 +8,13 @@ import numpy as np
 import pytest
 
 from dqn_mine.replay import ReplayLayout
-from dqn_mine.system.shared import BlockSpec, SharedBlocks, SharedMemoryError, \
-    check_free_space, leftover_segments
+from dqn_mine.shared import (
+    BlockSpec,
+    SharedBlocks,
+    SharedMemoryError,
+    check_free_space,
+    leftover_segments,
+)
 
 SPECS = [BlockSpec("x", (4, 3), "float32", np.nan), BlockSpec("n", (5,), "int64", 7),
          BlockSpec("raw", (16,), "uint8", None), BlockSpec("empty", (0, 3), "int8", -1)]

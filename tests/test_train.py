@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from dqn_mine.system.shared import leftover_segments
+from dqn_mine.shared import leftover_segments
 
 ROOT = Path(__file__).resolve().parents[1]
 # A tiny fast configuration on top of the smoke preset.
@@ -117,7 +117,7 @@ def test_serial_run_writes_the_run_folder(tmp_path):
 
 
 def test_saved_replay_is_read_back_on_resume_without_a_prefill(tmp_path):
-    from dqn_mine.system import checkpoint as ckpt
+    from dqn_mine import checkpoint as ckpt
 
     run_dir, replay_dir = tmp_path / "run", tmp_path / "replay"
     res = run_train(*TINY, "--serial", "--updates", "40", "--run-dir", str(run_dir),
@@ -142,7 +142,7 @@ def test_saved_replay_is_read_back_on_resume_without_a_prefill(tmp_path):
 
 def test_resumed_actors_draw_new_seeds():
     from dqn_mine.config import parse_args
-    from dqn_mine.system.actor import actor_specs
+    from dqn_mine.system.specs import actor_specs
 
     cfg = parse_args(["--actors", "3", "--eval-every", "100"])
     seeds = [[s.seed for s in actor_specs(cfg, g)] for g in range(3)]
@@ -152,7 +152,7 @@ def test_resumed_actors_draw_new_seeds():
 
 def test_resume_takes_the_new_learning_rate(tmp_path):
     """Flags given on resume win, the optimiser's saved learning rate included."""
-    from dqn_mine.system import checkpoint as ckpt
+    from dqn_mine import checkpoint as ckpt
 
     run_dir = tmp_path / "resumed"
     res = run_train(*TINY, "--serial", "--updates", "40", "--run-dir", str(run_dir))
@@ -162,52 +162,6 @@ def test_resume_takes_the_new_learning_rate(tmp_path):
     state = ckpt.load(run_dir / "checkpoint.pt")
     assert {g["lr"] for g in state["updater"]["optimizer"]["param_groups"]} == {1e-5}
     assert json.loads((run_dir / "config.json").read_text())["lr"] == 1e-5
-
-
-def test_replay_ratio_budget_counts_updates_since_the_actor_started():
-    """After a resume the update counter starts high but the actors' steps start at zero: the
-    actors' step budget must grow with the updates done since, not with the total."""
-    from types import SimpleNamespace
-
-    from dqn_mine.config import parse_args
-    from dqn_mine.system.actor import Actor
-    from dqn_mine.system.control import Control
-    from dqn_mine.system.shared import SharedBlocks
-
-    cfg = parse_args(["--actors", "2", "--prefill", "200", "--replay-ratio", "0.05",
-                      "--batch-size", "32"])
-    with SharedBlocks.create(Control.specs(2)) as blocks:
-        control = Control(blocks)
-        control.updates = 5000                                     # restored from a checkpoint
-        actor = SimpleNamespace(cfg=cfg, control=control, updates_at_start=control.updates)
-        slack = 2 * 32 / 0.05 / 2 + 64
-        assert Actor.allowed_steps(actor) == 200 + slack
-        control.updates = 5060
-        assert Actor.allowed_steps(actor) == 200 + 60 / 0.05 / 2 + slack
-
-
-@pytest.mark.parametrize("actors,ratio,overshoot", [(9, 0.111, 0), (9, 0.111, 5000),
-                                                    (1, 0.05, 300), (7, 0.023, 10_000)])
-def test_replay_ratio_never_deadlocks_when_every_actor_is_at_its_cap(actors, ratio, overshoot):
-    """Regression: the learner used to count new steps from those measured when pre-fill ended,
-    the actors from the nominal pre-fill. Fast actors that had overshot the pre-fill and reached
-    their caps by then left neither side a step to take. Whatever the overshoot, actors at their
-    caps must leave the learner an update, and the learner's updates must raise the caps."""
-    from dqn_mine.config import parse_args
-    from dqn_mine.system.actor import actor_step_budget, learner_may_update, prefill_target
-
-    cfg = parse_args(["--actors", str(actors), "--prefill", "2000", "--replay-ratio", str(ratio)])
-    prefill_end = prefill_target(cfg) + overshoot   # steps measured when the learner starts
-    updates = 0
-    for _ in range(200):
-        at_cap = actors * int(actor_step_budget(cfg, updates))
-        steps = max(prefill_end, at_cap)           # every actor as far as it may go
-        assert learner_may_update(cfg, updates, steps)
-        while learner_may_update(cfg, updates, steps):
-            updates += 1
-        assert actor_step_budget(cfg, updates) * actors > steps   # the actors may move again
-    # and the ratio holds: updates per step after the nominal pre-fill stay close to the target
-    assert updates / (steps - prefill_target(cfg)) == pytest.approx(ratio, rel=0.05)
 
 
 # -- parallel runs ---------------------------------------------------------------------------
@@ -244,7 +198,7 @@ def test_sigint_stops_cleanly_and_resume_continues(tmp_path, save_replay):
     assert "--resume" in out
     wait_for(lambda: not alive(kids), 10, "every child process to exit")
     stopped_at = int(metrics_rows(run_dir)[-1]["update"])
-    from dqn_mine.system import checkpoint as ckpt
+    from dqn_mine import checkpoint as ckpt
 
     # the last metrics row is the stop itself, not the last log interval before it
     assert int(ckpt.load(run_dir)["counters"]["updates"]) == stopped_at

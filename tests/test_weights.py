@@ -11,7 +11,7 @@ import torch
 from torch import nn
 
 from dqn_mine.agent.network import DuelingQNetwork
-from dqn_mine.system.shared import SharedBlocks, leftover_segments
+from dqn_mine.shared import SharedBlocks, leftover_segments
 from dqn_mine.system.weights import WeightBroadcast
 
 CTX = mp.get_context("spawn")

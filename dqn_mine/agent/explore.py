@@ -19,9 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from dqn_mine.env.mine import ACTION_NAMES, INTERACT
+from dqn_mine.env.interface import INTERACT, NUM_ACTIONS
 
-NUM_ACTIONS = len(ACTION_NAMES)
 # Actions below INTERACT (forward, backward, the turns) are held; interact and no-op last one step.
 HELD_ACTIONS = INTERACT
 

@@ -10,7 +10,8 @@ bootstraps), and 0 when the episode terminated inside the window (nothing to boo
 from __future__ import annotations
 
 import copy
-from typing import Dict, NamedTuple, Optional, Sequence, Tuple, Union
+from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -26,20 +27,20 @@ class TensorBatch(NamedTuple):
     ``indices`` stays a numpy array on the host: it is only used to send priorities back.
     """
 
-    obs: torch.Tensor            # uint8 [B, 3f, 44, 76]
+    obs: torch.Tensor            # uint8 [B, 3f, H, W]
     history: torch.Tensor        # int8 [B, h], -1 = no action yet
     carrying: torch.Tensor       # float32 [B]
     action: torch.Tensor         # int64 [B]
     ret: torch.Tensor            # float32 [B], discounted n-step return
     discount: torch.Tensor       # float32 [B], gamma**k, 0 after termination
-    next_obs: torch.Tensor       # uint8 [B, 3f, 44, 76]
+    next_obs: torch.Tensor       # uint8 [B, 3f, H, W]
     next_history: torch.Tensor   # int8 [B, h]
     next_carrying: torch.Tensor  # float32 [B]
     weights: torch.Tensor        # float32 [B], importance-sampling weights (max 1)
     indices: np.ndarray          # int64 [B], replay slots (host side)
 
 
-def batch_to_device(batch, device: Union[str, torch.device]) -> TensorBatch:
+def batch_to_device(batch, device: str | torch.device) -> TensorBatch:
     """Numpy batch (any NamedTuple with TensorBatch's fields) -> TensorBatch on ``device``.
 
     On CPU the tensors share memory with the numpy arrays (no copy). On CUDA they go through pinned
@@ -63,7 +64,7 @@ def batch_to_device(batch, device: Union[str, torch.device]) -> TensorBatch:
 # -- targets and loss --------------------------------------------------------------------------
 
 def nstep_return(rewards: Sequence[float], gamma: float,
-                 terminated_at: Optional[int] = None) -> Tuple[float, float]:
+                 terminated_at: int | None = None) -> tuple[float, float]:
     """Reference n-step return and bootstrap discount of one window (for tests and writers).
 
     ``rewards`` are the k <= n rewards that followed the start state (k < n when the episode was
@@ -93,7 +94,7 @@ def double_dqn_target(online: nn.Module, target: nn.Module, batch: TensorBatch) 
 
 
 def td_loss(online: nn.Module, target: nn.Module,
-            batch: TensorBatch) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+            batch: TensorBatch) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """IS-weighted Huber loss -> (loss scalar, |TD error| [B] detached, Q(s, a) [B] detached)."""
     y = double_dqn_target(online, target, batch)  # [B]
     q_taken = q_of(online, batch).gather(1, batch.action.long().unsqueeze(1)).squeeze(1)  # [B]
@@ -145,8 +146,8 @@ class DQNUpdater:
     """
 
     def __init__(self, net: nn.Module, lr: float = 3e-5, target_update_interval: int = 2500,
-                 device: Union[str, torch.device] = "cpu",
-                 max_grad_norm: Optional[float] = None, precision: str = "float32"):
+                 device: str | torch.device = "cpu",
+                 max_grad_norm: float | None = None, precision: str = "float32"):
         if precision not in PRECISIONS:
             raise ValueError(f"precision must be one of {PRECISIONS}, not {precision!r}")
         self.device = torch.device(device)
@@ -165,7 +166,7 @@ class DQNUpdater:
             self._work = WorkingCopy(self.online, torch.bfloat16)
             self._work_target = WorkingCopy(self.target, torch.bfloat16)
 
-    def update(self, batch) -> Dict[str, object]:
+    def update(self, batch) -> dict[str, object]:
         """One gradient step on ``batch`` (numpy ``Batch`` or :class:`TensorBatch`).
 
         Returns ``loss``, ``mean_q``, ``sampled_reward`` (mean n-step return of the batch) as

@@ -15,14 +15,12 @@
 from __future__ import annotations
 
 import copy
-from typing import Tuple
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-FRAME_SHAPE = (3, 44, 76)
-NUM_ACTIONS = 6
+from dqn_mine.env.interface import FRAME_SHAPE, NUM_ACTIONS
 
 
 def one_hot_history(history: torch.Tensor, num_actions: int) -> torch.Tensor:
@@ -41,7 +39,7 @@ class DuelingQNetwork(nn.Module):
     """Dueling DQN over a (stacked) camera frame, a one-hot action history and a carrying flag."""
 
     def __init__(self, frame_stack: int = 1, history_len: int = 20, num_actions: int = NUM_ACTIONS,
-                 frame_shape: Tuple[int, int, int] = FRAME_SHAPE):
+                 frame_shape: tuple[int, int, int] = FRAME_SHAPE):
         super().__init__()
         self.frame_stack = frame_stack
         self.history_len = history_len

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Dict, List, Optional
 
 import numpy as np
 
@@ -102,7 +101,7 @@ class _Tracker:
 
 
 def measure(env_kwargs: dict, policy: Policy, episodes: int, num_envs: int = 32,
-            seed: int = 0, network_kwargs: Optional[dict] = None) -> Dict[str, float]:
+            seed: int = 0, network_kwargs: dict | None = None) -> dict[str, float]:
     """Run ``episodes`` episodes (``num_envs`` at a time) and return each sub-goal's share, the
     mean steps to the first reward, the share of idle steps and env steps/s."""
     import torch
@@ -116,7 +115,7 @@ def measure(env_kwargs: dict, policy: Policy, episodes: int, num_envs: int = 32,
 
 
 def _measure(env_kwargs: dict, policy: Policy, episodes: int, num_envs: int, seed: int,
-             network_kwargs: Optional[dict]) -> Dict[str, float]:
+             network_kwargs: dict | None) -> dict[str, float]:
     import torch
 
     from dqn_mine.agent.explore import Explorer
@@ -134,7 +133,7 @@ def _measure(env_kwargs: dict, policy: Policy, episodes: int, num_envs: int, see
     hist = np.full((num_envs, h), -1, np.int8)                              # [E, h]
     carrying = np.zeros(num_envs, np.float32)                                # [E]
     stuck = np.zeros(num_envs, bool)                                         # [E]
-    trackers: List[Optional[_Tracker]] = [None] * num_envs
+    trackers: list[_Tracker | None] = [None] * num_envs
     started = 0
 
     def begin(j):
@@ -149,7 +148,7 @@ def _measure(env_kwargs: dict, policy: Policy, episodes: int, num_envs: int, see
         begin(j)
     counts = dict.fromkeys(SUBGOALS, 0)
     idle = 0
-    first_reward: List[int] = []
+    first_reward: list[int] = []
     done, steps, t0 = 0, 0, time.perf_counter()
     active = np.ones(num_envs, bool)
     while active.any():
@@ -192,7 +191,7 @@ def _measure(env_kwargs: dict, policy: Policy, episodes: int, num_envs: int, see
     return out
 
 
-def table(rows: List[tuple]) -> List[str]:
+def table(rows: list[tuple]) -> list[str]:
     lines = ["| task | policy | episodes | " + " | ".join(SUBGOALS) +
              " | mean steps to reward | idle steps |",
              "|---|---|---|" + "---|" * (len(SUBGOALS) + 2)]
@@ -206,7 +205,7 @@ def table(rows: List[tuple]) -> List[str]:
 
 
 def fresh_network_inputs(nets: int = 5, episodes: int = 8, steps: int = 40,
-                         seed: int = 0) -> List[Dict[str, float]]:
+                         seed: int = 0) -> list[dict[str, float]]:
     """What a freshly initialised network's greedy action depends on, for ``nets`` inits.
 
     Frames come from random play in ``two-room``; each is paired with a random action history.
@@ -245,7 +244,7 @@ def fresh_network_inputs(nets: int = 5, episodes: int = 8, steps: int = 40,
     return out
 
 
-def inputs_table(rows: List[Dict[str, float]]) -> List[str]:
+def inputs_table(rows: list[dict[str, float]]) -> list[str]:
     lines = ["| network init | greedy action changes with the image | with the history | "
              "most frequent greedy action |", "|---|---:|---:|---:|"]
     for k, r in enumerate(rows):

@@ -25,7 +25,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Callable, Dict, List
+from typing import Callable
 
 LEARNING_SECONDS = 300
 RENDER_PROCESSES = (1, 7, 15)
@@ -114,7 +114,7 @@ def learning_run(out_dir: Path, seconds: float = LEARNING_SECONDS) -> dict:
             "summary": summary}
 
 
-def step(name: str, fn: Callable[[], dict], figures: Dict[str, dict]) -> None:
+def step(name: str, fn: Callable[[], dict], figures: dict[str, dict]) -> None:
     start = time.perf_counter()
     print(f"gpu-check: {name} ...", file=sys.stderr, flush=True)
     try:
@@ -124,8 +124,8 @@ def step(name: str, fn: Callable[[], dict], figures: Dict[str, dict]) -> None:
     figures[name]["seconds_taken"] = round(time.perf_counter() - start, 1)
 
 
-def summary_markdown(figures: Dict[str, dict]) -> str:
-    lines: List[str] = ["# gpu-check", "", f"Machine: {figures['machine']}", ""]
+def summary_markdown(figures: dict[str, dict]) -> str:
+    lines: list[str] = ["# gpu-check", "", f"Machine: {figures['machine']}", ""]
     learner = figures.get("learner", {})
     lines += ["## Learner on CUDA", ""]
     if "rows" in learner:
@@ -177,7 +177,7 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     from dqn_mine.bench.__main__ import machine_line
 
-    figures: Dict[str, dict] = {"machine": machine_line(), "cores": os.cpu_count()}
+    figures: dict[str, dict] = {"machine": machine_line(), "cores": os.cpu_count()}
     step("learner", learner_figures, figures)
     step("render", render_figures, figures)
     step("system", system_figures, figures)

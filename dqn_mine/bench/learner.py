@@ -17,7 +17,7 @@ from __future__ import annotations
 import os
 import statistics
 import time
-from typing import Callable, Dict, List
+from typing import Callable
 
 import numpy as np
 import torch
@@ -52,12 +52,12 @@ def rate(step: Callable[[], None], seconds: float, warmup: int = 3, sync=lambda:
     return n / (time.perf_counter() - start)
 
 
-def side_by_side(steps: Dict[str, Callable[[], None]], seconds: float, rounds: int,
-                 sync=lambda: None) -> Dict[str, float]:
+def side_by_side(steps: dict[str, Callable[[], None]], seconds: float, rounds: int,
+                 sync=lambda: None) -> dict[str, float]:
     """Median calls/s of each step, timed in turns (``rounds`` rounds of ``seconds`` each)."""
     for step in steps.values():
         rate(step, 0.05, warmup=3, sync=sync)
-    samples: Dict[str, List[float]] = {name: [] for name in steps}
+    samples: dict[str, list[float]] = {name: [] for name in steps}
     for _ in range(rounds):
         for name, step in steps.items():
             samples[name].append(rate(step, seconds, warmup=1, sync=sync))
@@ -74,9 +74,9 @@ def _layer_flops(module: nn.Module, output: torch.Tensor) -> float:
     return 2.0 * module.in_features * module.out_features
 
 
-def _per_layer_flops(net: nn.Module) -> List[tuple]:
+def _per_layer_flops(net: nn.Module) -> list[tuple]:
     """(layer, FLOPs) of one frame's forward pass, in the order the layers run."""
-    layers: List[tuple] = []
+    layers: list[tuple] = []
     hooks = [m.register_forward_hook(lambda m, i, out: layers.append((m, _layer_flops(m, out))))
              for m in net.modules() if isinstance(m, (nn.Conv2d, nn.Linear))]
     try:
@@ -89,7 +89,7 @@ def _per_layer_flops(net: nn.Module) -> List[tuple]:
     return layers
 
 
-def forward_flops(net: nn.Module) -> Dict[str, float]:
+def forward_flops(net: nn.Module) -> dict[str, float]:
     """Multiply-adds x 2 of one frame's forward pass, per layer kind (convs, linears)."""
     flops = {"conv": 0.0, "linear": 0.0}
     for module, f in _per_layer_flops(net):
@@ -125,8 +125,8 @@ def _update_step(updater: DQNUpdater, host: Batch, device: str) -> Callable[[], 
     return lambda: updater.update(batch_to_device(host, device))
 
 
-def learner_rates(precisions: List[str], batch_size: int, device: str, seconds: float,
-                  rounds: int) -> Dict[str, float]:
+def learner_rates(precisions: list[str], batch_size: int, device: str, seconds: float,
+                  rounds: int) -> dict[str, float]:
     """Updates/s of each precision's update at ``batch_size``, timed side by side."""
     host = synthetic_batch(batch_size)
     steps = {p: _update_step(_updater(p, device), host, device) for p in precisions}
@@ -165,12 +165,12 @@ def contended_learner_rate(threads: int, seconds: float, precision: str = "float
             proc.kill()
 
 
-def cpu_precisions() -> List[str]:
+def cpu_precisions() -> list[str]:
     """The reference, plus bfloat16 where this CPU computes it natively."""
     return ["float32", "bfloat16"] if native_bf16() else ["float32"]
 
 
-def learner_section(quick: bool) -> List[str]:
+def learner_section(quick: bool) -> list[str]:
     seconds, rounds = (0.3, 3) if quick else (0.6, 7)
     cores = os.cpu_count() or 1
     precisions = cpu_precisions()
@@ -211,7 +211,7 @@ def learner_section(quick: bool) -> List[str]:
     return lines
 
 
-def cuda_rows(per_sample: float, seconds: float, rounds: int) -> List[str]:
+def cuda_rows(per_sample: float, seconds: float, rounds: int) -> list[str]:
     name = torch.cuda.get_device_name()
     precisions = ["float32"] + (["bfloat16"] if torch.cuda.is_bf16_supported() else [])
     lines = []
@@ -222,7 +222,7 @@ def cuda_rows(per_sample: float, seconds: float, rounds: int) -> List[str]:
     return lines
 
 
-def _row(device, threads, b: int, precision: str, rates: Dict[str, float],
+def _row(device, threads, b: int, precision: str, rates: dict[str, float],
          per_sample: float, limit: float) -> str:
     """``per_sample``: FLOPs of an update per sample (``update_flops(net, 1)``)."""
     r = rates[precision]

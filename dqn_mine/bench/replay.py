@@ -22,13 +22,20 @@ import gc
 import statistics
 import sys
 import time
-from typing import Callable, Dict, List, Optional
+from typing import Callable
 
 import numpy as np
 
-from dqn_mine.replay import Batch, MinTree, NStepWriter, PrioritizedReplay, ReplayLayout, \
-    ReplayStorage, SumTree
-from dqn_mine.system.shared import SharedBlocks
+from dqn_mine.replay import (
+    Batch,
+    MinTree,
+    NStepWriter,
+    PrioritizedReplay,
+    ReplayLayout,
+    ReplayStorage,
+    SumTree,
+)
+from dqn_mine.shared import SharedBlocks
 
 try:
     import cpprb
@@ -52,9 +59,9 @@ def _rate(fn: Callable[[], None], seconds: float) -> float:
             return n / dt
 
 
-def _alternate(fns: Dict[str, Callable[[], None]], seconds: float, reps: int) -> Dict[str, float]:
+def _alternate(fns: dict[str, Callable[[], None]], seconds: float, reps: int) -> dict[str, float]:
     """Median rate of each fn, measured in alternation so noise hits them alike."""
-    rates: Dict[str, List[float]] = {k: [] for k in fns}
+    rates: dict[str, list[float]] = {k: [] for k in fns}
     for _ in range(reps):
         for k, fn in fns.items():
             rates[k].append(_rate(fn, seconds / reps))
@@ -73,7 +80,7 @@ def _mem_available() -> int:
 
 
 # -- 1. tree round ------------------------------------------------------------------------------
-def _tree_round(quick: bool) -> List[str]:
+def _tree_round(quick: bool) -> list[str]:
     cap = 2 ** 20
     rng = np.random.default_rng(0)
     prio = rng.random(cap) + 0.01
@@ -120,7 +127,7 @@ def _tree_rates(storage: ReplayStorage, prio: np.ndarray, trees_only, quick: boo
             n = 1 << 16
             rb.add(obs=np.zeros((n, 1)), act=np.zeros(n), rew=np.zeros(n),
                    next_obs=np.zeros((n, 1)), done=np.zeros(n), priorities=prio[lo:lo + n])
-    rows: Dict[str, Dict[int, float]] = {}
+    rows: dict[str, dict[int, float]] = {}
     for b in (512, 32):
         out = Batch.empty(storage.layout, b)
 
@@ -169,7 +176,7 @@ class _Frames:
         self.act = rng.integers(0, 6, 256)
 
 
-def _ours_frames(cap: int, warm: int, streams: int, seconds: float) -> Dict[str, float]:
+def _ours_frames(cap: int, warm: int, streams: int, seconds: float) -> dict[str, float]:
     layout = ReplayLayout(num_streams=streams, stream_capacity=cap // streams)
     t0 = time.perf_counter()
     blocks = SharedBlocks.create(layout.block_specs())
@@ -181,11 +188,11 @@ def _ours_frames(cap: int, warm: int, streams: int, seconds: float) -> Dict[str,
     return res
 
 
-def _ours_frames_rates(storage: ReplayStorage, warm: int, seconds: float) -> Dict[str, float]:
+def _ours_frames_rates(storage: ReplayStorage, warm: int, seconds: float) -> dict[str, float]:
     layout, cap = storage.layout, storage.capacity
     data = _Frames(np.random.default_rng(1))
     writers = [NStepWriter(storage, k) for k in range(layout.num_streams)]
-    res: Dict[str, float] = {}
+    res: dict[str, float] = {}
 
     def write(w: NStepWriter, steps: int):
         f, q, a = data.frames, data.q, data.act
@@ -226,9 +233,9 @@ def _ours_frames_rates(storage: ReplayStorage, warm: int, seconds: float) -> Dic
     return res
 
 
-def _cpprb_frames(cap: int, warm: int, seconds: float) -> Dict[str, float]:
+def _cpprb_frames(cap: int, warm: int, seconds: float) -> dict[str, float]:
     data = _Frames(np.random.default_rng(1))
-    res: Dict[str, float] = {}
+    res: dict[str, float] = {}
     t0 = time.perf_counter()
     rb = cpprb.PrioritizedReplayBuffer(
         cap, {"obs": {"shape": FRAME, "dtype": np.uint8}, "act": {}, "rew": {}, "done": {}},
@@ -264,7 +271,7 @@ def _cpprb_frames(cap: int, warm: int, seconds: float) -> Dict[str, float]:
     return res                    # rb goes with the call; the caller collects
 
 
-def _frames_section(quick: bool) -> List[str]:
+def _frames_section(quick: bool) -> list[str]:
     streams = 8
     want = 2 ** 16 if quick else 2 ** 20
     need = want * int(np.prod(FRAME)) * 1.15
@@ -322,7 +329,7 @@ def run(quick: bool = False) -> str:
     return "\n".join(lines)
 
 
-def main(argv: Optional[List[str]] = None) -> int:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="short run (< 1 minute), small frame ring")
     args = ap.parse_args(argv)

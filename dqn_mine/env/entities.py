@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 
@@ -57,7 +57,7 @@ class Entity:
                           math.cos(self.yaw), math.sin(self.yaw))
 
 
-@lru_cache(maxsize=None)
+@cache
 def local_mesh(kind: str) -> np.ndarray:
     if kind == KIT:
         return mesh.kit_mesh()

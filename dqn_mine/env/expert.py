@@ -22,9 +22,9 @@ import random
 from collections import deque
 
 from dqn_mine.env.entities import KIT, Entity
+from dqn_mine.env.interface import BACKWARD, FORWARD, INTERACT, TURN_LEFT, TURN_RIGHT
 from dqn_mine.env.layout import Door
-from dqn_mine.env.mine import (AGENT_RADIUS, ASIDE_CLEARANCE, BACKWARD, DROP_GAP, FORWARD,
-                               HEADINGS, INTERACT, TURN_LEFT, TURN_RIGHT, MineEnv)
+from dqn_mine.env.mine import AGENT_RADIUS, ASIDE_CLEARANCE, DROP_GAP, HEADINGS, MineEnv
 
 CELL = 0.5              # grid resolution inside a room
 MARGIN = 0.2            # extra clearance the planner keeps from walls and entities
@@ -185,7 +185,7 @@ class Expert:
     def _stand_point(self, target: Entity) -> tuple[float, float]:
         """A free spot in this room from which the agent faces ``target`` within reach."""
         env = self.env
-        key = ("stand", id(target), target.x, target.z, env.version, self.room)
+        key = ("stand", id(target), target.x, target.z, env.entity_moves, self.room)
         if key in self._fields:
             return self._fields[key]
         grid = self._grid(self.room)
@@ -244,18 +244,18 @@ class Expert:
     def _turn_to(self, want: int) -> int:
         return TURN_RIGHT if (want - self.env.heading) % HEADINGS <= HEADINGS // 2 else TURN_LEFT
 
-    def _grid(self, room: int) -> "_Grid":
-        key = ("grid", room, self.env.version)
+    def _grid(self, room: int) -> _Grid:
+        key = ("grid", room, self.env.entity_moves)
         if key not in self._fields:
             self._fields[key] = _Grid(self.env, room)
         return self._fields[key]
 
-    def _field(self, grid: "_Grid", goal: tuple[float, float]) -> dict:
-        key = ("field", grid.room, self.env.version, goal)
+    def _field(self, grid: _Grid, goal: tuple[float, float]) -> dict:
+        key = ("field", grid.room, self.env.entity_moves, goal)
         if key not in self._fields:
             if len(self._fields) > 64:
                 self._fields.clear()
-                self._fields[("grid", grid.room, self.env.version)] = grid
+                self._fields[("grid", grid.room, self.env.entity_moves)] = grid
             self._fields[key] = grid.distances(goal)
         return self._fields[key]
 

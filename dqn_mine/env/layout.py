@@ -31,7 +31,7 @@ class Room:
         return ((self.x0 + margin <= x <= self.x1 - margin)
                 and (self.z0 + margin <= z <= self.z1 - margin))
 
-    def overlaps(self, other: "Room") -> bool:
+    def overlaps(self, other: Room) -> bool:
         """True when the interiors intersect (sharing a wall is fine)."""
         return (self.x0 < other.x1 - _EPS and other.x0 < self.x1 - _EPS
                 and self.z0 < other.z1 - _EPS and other.z0 < self.z1 - _EPS)

@@ -16,9 +16,19 @@ from gymnasium import spaces
 
 from dqn_mine.env import mesh
 from dqn_mine.env.entities import BOULDER, KIT, MINER, Entity, local_mesh
+from dqn_mine.env.interface import (
+    BACKWARD,
+    FORWARD,
+    FRAME_SHAPE,
+    INTERACT,
+    NUM_ACTIONS,
+    OBS_HEIGHT,
+    OBS_WIDTH,
+    TURN_LEFT,
+    TURN_RIGHT,
+)
 from dqn_mine.env.layout import Door, Layout, generate_layout
 
-OBS_HEIGHT, OBS_WIDTH = 44, 76
 AGENT_RADIUS = 0.4
 FORWARD_STEP = 0.5
 HEADINGS = 40                      # 360 / 9 degrees: headings are exact table entries
@@ -59,10 +69,6 @@ FOV_RANGE = (50.0, 70.0)           # vertical field of view, degrees
 _COS = [math.cos(2 * math.pi * k / HEADINGS) for k in range(HEADINGS)]
 _SIN = [math.sin(2 * math.pi * k / HEADINGS) for k in range(HEADINGS)]
 
-FORWARD, BACKWARD, TURN_RIGHT, TURN_LEFT, INTERACT, NOOP = range(6)
-ACTION_NAMES = ("forward", "backward", "turn right", "turn left", "pick/drop/exchange/deliver",
-                "no-op")
-
 
 class MineEnv(gym.Env):
     """Base class of the mine tasks; subclasses implement ``_generate()``.
@@ -82,8 +88,8 @@ class MineEnv(gym.Env):
         self.max_episode_steps = int(max_episode_steps)
         self.randomise_visuals = bool(randomise_visuals)
         self.light, self.tint, self.fov_y = 1.0, np.ones(3, np.float32), FOV_Y
-        self.observation_space = spaces.Box(0, 255, (3, OBS_HEIGHT, OBS_WIDTH), np.uint8)
-        self.action_space = spaces.Discrete(6)
+        self.observation_space = spaces.Box(0, 255, FRAME_SHAPE, np.uint8)
+        self.action_space = spaces.Discrete(NUM_ACTIONS)
         self.layout: Layout | None = None
         self.entities: list[Entity] = []   # everything in the world, the carried item included
         self.carrying: Entity | None = None
@@ -96,7 +102,7 @@ class MineEnv(gym.Env):
         self._walk: list[tuple[float, float, float, float]] = []
         self._expert = None
         self._last_obs = None
-        self.version = 0  # bumped whenever an entity moves (the expert caches plans by it)
+        self.entity_moves = 0  # bumped whenever an entity moves (the expert caches plans by it)
 
     # --- gymnasium API --------------------------------------------------------------------
 
@@ -123,7 +129,7 @@ class MineEnv(gym.Env):
     def step(self, action):
         if action.__class__ is not int:
             action = _as_action(action)
-        elif not 0 <= action <= 5:
+        elif not 0 <= action < NUM_ACTIONS:
             raise ValueError(f"action must be an integer in 0..5, got {action}")
         terminated = False
         if action == FORWARD:
@@ -330,7 +336,7 @@ class MineEnv(gym.Env):
 
     def _entities_changed(self, static: bool = False) -> None:
         """Refresh collision discs and the entity geometry after something moved."""
-        self.version += 1
+        self.entity_moves += 1
         world = self.world_entities()
         self._obstacles = [(e.x, e.z, (AGENT_RADIUS + e.radius) ** 2) for e in world]
         if self._scene is None:
@@ -368,40 +374,59 @@ class MineEnv(gym.Env):
         self._last_obs = obs
         return obs
 
-    # --- builders for tasks -------------------------------------------------------------------
+    # --- builders for tasks (dqn_mine/env/tasks.py composes its starts from these) -------------
 
     def _generate(self) -> None:
         raise NotImplementedError
 
-    def _build_layout(self, num_rooms: int, chain: bool) -> None:
+    def build_layout(self, num_rooms: int, chain: bool) -> None:
         self.layout = generate_layout(self._rng, num_rooms, self.room_size, DOOR_WIDTH, chain)
 
-    def _block_doorways(self) -> list[Entity]:
+    def block_doorways(self) -> list[Entity]:
         """A boulder in the middle of every doorway."""
         boulders = []
         for door in self.layout.doors:
             x, z = door.center
-            boulders.append(self._add(Entity(BOULDER, x, z, self._rng.uniform(0, 2 * math.pi))))
+            boulders.append(self.add(Entity(BOULDER, x, z, self._rng.uniform(0, 2 * math.pi))))
         return boulders
 
-    def _move_aside(self, boulder: Entity, door: Door) -> None:
+    def move_aside(self, boulder: Entity, door: Door) -> None:
         """Put a doorway's boulder somewhere in one of the two rooms it joins, clear of doorways."""
         room = self._rng.choice((door.a, door.b))
         boulder.x, boulder.z = self._random_spot(boulder.radius, room, ASIDE_CLEARANCE, boulder)
 
-    def _place(self, kind: str, room: int) -> Entity:
+    def place(self, kind: str, room: int) -> Entity:
         """A new entity at a random free spot in ``room`` (place entities before the agent)."""
         ent = Entity(kind, yaw=self._rng.uniform(0, 2 * math.pi))
         ent.x, ent.z = self._random_spot(ent.radius, room, DOOR_CLEARANCE, ent)
-        return self._add(ent)
+        return self.add(ent)
 
-    def _place_agent(self, room: int) -> None:
+    def place_agent(self, room: int) -> None:
         self.agent_x, self.agent_z = self._random_spot(AGENT_RADIUS, room, DOOR_CLEARANCE)
         self.heading = self._rng.randrange(HEADINGS)
 
-    def _add(self, ent: Entity) -> Entity:
+    def place_agent_near(self, room: int, item: Entity, near: float, far: float) -> None:
+        """The agent at a random spot of ``room`` between ``near`` and ``far`` units from
+        ``item``'s centre, facing anywhere (``item`` is the only entity that close)."""
+        m, margin = self.layout.rooms[room], AGENT_RADIUS + 0.3
+        rand = self._rng.uniform
+        for _ in range(1000):
+            x = rand(max(m.x0, item.x - far) + margin, min(m.x1, item.x + far) - margin)
+            z = rand(max(m.z0, item.z - far) + margin, min(m.z1, item.z + far) - margin)
+            if near <= math.hypot(x - item.x, z - item.z) <= far:
+                self.agent_x, self.agent_z = x, z
+                self.heading = self._rng.randrange(HEADINGS)
+                return
+        raise RuntimeError(f"no spot in room {room} {near:g}-{far:g} units from the {item.kind}")
+
+    def add(self, ent: Entity) -> Entity:
         self.entities.append(ent)
         return ent
+
+    def random_rooms(self, count: int) -> tuple[int, ...]:
+        """``count`` rooms drawn uniformly (with repeats) from the episode's stream."""
+        n = len(self.layout.rooms)
+        return tuple(self._rng.randrange(n) for _ in range(count))
 
     def _random_spot(self, radius: float, room: int, door_clearance: float,
                      exclude: Entity | None = None) -> tuple[float, float]:
@@ -430,7 +455,7 @@ def _carry_ahead(item: Entity) -> float:
 def _as_action(action) -> int:
     try:
         value = int(action)
-        ok = value == action and 0 <= value <= 5
+        ok = value == action and 0 <= value < NUM_ACTIONS
     except (TypeError, ValueError):
         ok = False
     if not ok:

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from dqn_mine.env.entities import KIT, MINER, Entity
-from dqn_mine.env.mine import AGENT_RADIUS, HEADINGS, MIN_ROOM_SIZE, MineEnv
+from dqn_mine.env.mine import MIN_ROOM_SIZE, MineEnv
 
 # The expert solves every episode within the 2,000-step limit up to 12 rooms (measured: at most
 # 1,363 steps over 40 seeds each of 6-12 rooms); at 16 rooms some episodes need more.
@@ -79,69 +79,55 @@ NEAR_BOULDER = (2.0, 4.0)   # distance of the agent from the blocked doorway's c
 TASK_PHASES = {"two-room": TWO_ROOM_PHASES, "three-room": PHASES}
 
 
-def _one_room(env: "MineRescueEnv") -> None:
-    env._build_layout(1, chain=False)
-    env._place(MINER, 0)
-    env._place(KIT, 0)
-    env._place_agent(0)
+def _one_room(env: MineRescueEnv) -> None:
+    env.build_layout(1, chain=False)
+    env.place(MINER, 0)
+    env.place(KIT, 0)
+    env.place_agent(0)
 
 
-def _two_room(env: "MineRescueEnv") -> None:
-    env._build_layout(2, chain=False)
-    _populate(env, env._block_doorways(), kit_room=1, miner_room=1)
+def _two_room(env: MineRescueEnv) -> None:
+    env.build_layout(2, chain=False)
+    _populate(env, env.block_doorways(), kit_room=1, miner_room=1)
 
 
-def _three_room(env: "MineRescueEnv") -> None:
-    env._build_layout(3, chain=True)
-    _populate(env, env._block_doorways(), kit_room=2, miner_room=0)
+def _three_room(env: MineRescueEnv) -> None:
+    env.build_layout(3, chain=True)
+    _populate(env, env.block_doorways(), kit_room=2, miner_room=0)
 
 
-def _populate(env: "MineRescueEnv", boulders, kit_room: int, miner_room: int) -> None:
+def _populate(env: MineRescueEnv, boulders, kit_room: int, miner_room: int) -> None:
     """Place miner, kit and agent: the full task (agent in room 0), or a curriculum phase."""
     if env.phase is None or env.phase == 1:
-        agent, kit, miner = env._start_rooms(fixed=(0, kit_room, miner_room))
+        agent, kit, miner = env.start_rooms(fixed=(0, kit_room, miner_room))
         carrying, near = False, None
     else:
         phase = TASK_PHASES[env.task][env.phase]
         agent, kit, miner, carrying = phase.agent_room, kit_room, miner_room, phase.carrying_kit
         for boulder, door in list(zip(boulders, env.layout.doors))[:phase.boulders_aside]:
-            env._move_aside(boulder, door)
+            env.move_aside(boulder, door)
         if phase.holding_boulder:
             env.carrying = boulders[phase.boulders_aside]
         near = boulders[phase.boulders_aside] if phase.near_boulder else None
-    env._place(MINER, miner)
+    env.place(MINER, miner)
     if carrying:
-        env.carrying = env._add(Entity(KIT))
+        env.carrying = env.add(Entity(KIT))
     else:
-        env._place(KIT, kit)
+        env.place(KIT, kit)
     if near is not None:
-        _place_agent_near(env, near, agent)
+        env.place_agent_near(agent, near, *NEAR_BOULDER)
     else:
-        env._place_agent(agent)
+        env.place_agent(agent)
 
 
-def _place_agent_near(env: "MineRescueEnv", boulder: Entity, room: int) -> None:
-    """The agent at a random spot of ``room`` 2-4 units from ``boulder``, facing anywhere."""
-    m, lo, hi = env.layout.rooms[room], *NEAR_BOULDER
-    margin = AGENT_RADIUS + 0.3
-    for _ in range(1000):
-        x = env._rng.uniform(max(m.x0, boulder.x - hi) + margin, min(m.x1, boulder.x + hi) - margin)
-        z = env._rng.uniform(max(m.z0, boulder.z - hi) + margin, min(m.z1, boulder.z + hi) - margin)
-        if lo <= math.hypot(x - boulder.x, z - boulder.z) <= hi:
-            env.agent_x, env.agent_z = x, z
-            env.heading = env._rng.randrange(HEADINGS)
-            return
-    raise RuntimeError(f"no spot near the boulder in room {room}")
-
-
-def _rooms(env: "MineRescueEnv") -> None:
+def _rooms(env: MineRescueEnv) -> None:
     n = env.num_rooms
-    env._build_layout(n, chain=False)
-    env._block_doorways()
-    agent, kit, miner = (env._rng.randrange(n) for _ in range(3))
-    env._place(MINER, miner)
-    env._place(KIT, kit)
-    env._place_agent(agent)
+    env.build_layout(n, chain=False)
+    env.block_doorways()
+    agent, kit, miner = env.random_rooms(3)
+    env.place(MINER, miner)
+    env.place(KIT, kit)
+    env.place_agent(agent)
 
 
 @dataclass(frozen=True)
@@ -149,7 +135,7 @@ class Task:
     name: str
     rooms: int | None          # None: set by num_rooms
     step_limit: int
-    generate: Callable[["MineRescueEnv"], None]
+    generate: Callable[[MineRescueEnv], None]
 
 
 TASKS = {t.name: t for t in [
@@ -164,7 +150,7 @@ DEFAULT_NUM_ROOMS = 4
 class MineRescueEnv(MineEnv):
     """Rescue an injured miner: fetch the first-aid kit, clear boulders, deliver the kit.
 
-    Observation: first-person RGB, uint8 (3, 44, 76).
+    Observation: first-person RGB, uint8 FRAME_SHAPE (3, height 44, width 76).
     Actions: 0 forward 0.5, 1 backward 0.5, 2 turn right 9 deg, 3 turn left 9 deg,
         4 pick up / drop / exchange / deliver, 5 no-op.
     Reward: 1.0 when the kit is handed to the miner (terminated), else 0.0.
@@ -215,12 +201,11 @@ class MineRescueEnv(MineEnv):
     def _generate(self) -> None:
         TASKS[self.task].generate(self)
 
-    def _start_rooms(self, fixed: tuple[int, int, int]) -> tuple[int, int, int]:
+    def start_rooms(self, fixed: tuple[int, int, int]) -> tuple[int, int, int]:
         """(agent, kit, miner) rooms: the task's own, or random ones under domain randomisation."""
         if self.placement == "fixed":
             return fixed
-        n = len(self.layout.rooms)
-        return tuple(self._rng.randrange(n) for _ in range(3))
+        return self.random_rooms(3)
 
 
 def _is_int(value) -> bool:

@@ -10,10 +10,10 @@ Five small modules, each swappable (after TorchRL's split):
 ``snapshot``       the replay on disk (``--save-replay``): saved with the checkpoint, read on resume
 =================  ===================================================================
 
-Wiring (the runner owns the shared memory; see ``dqn_mine.system.shared``)::
+Wiring (the runner owns the shared memory; see ``dqn_mine.shared``)::
 
-    layout = ReplayLayout(num_streams=S, stream_capacity=M, frame_shape=(3, 44, 76),
-                          history_len=20, n_step=6, gamma=0.99, frame_stack=1, num_actions=6)
+    layout = ReplayLayout(num_streams=S, stream_capacity=M, frame_shape=FRAME_SHAPE,
+                          history_len=20, n_step=6, gamma=0.99, frame_stack=1)
     blocks = SharedBlocks.create(layout.block_specs())     # runner; frames are NOT pre-touched
     storage = ReplayStorage(layout, blocks)                # any process, after SharedBlocks.attach
 

@@ -9,7 +9,7 @@ min-tree the same value for live transitions and +inf elsewhere (so it gives the
 from __future__ import annotations
 
 from collections import deque
-from typing import NamedTuple, Optional
+from typing import NamedTuple
 
 import numpy as np
 
@@ -32,10 +32,10 @@ class Batch(NamedTuple):
     weights: np.ndarray        # float32 [B]          IS weights / max; 0 = overwritten meanwhile
     indices: np.ndarray        # int64 [B]            slots, for update_priorities
     # int64 [B] frame number each sampled slot held, for update_priorities (None: not recorded)
-    stamps: Optional[np.ndarray] = None
+    stamps: np.ndarray | None = None
 
     @staticmethod
-    def empty(layout, batch_size: int) -> "Batch":
+    def empty(layout, batch_size: int) -> Batch:
         """Preallocated arrays to pass as ``sample(..., out=)``."""
         b, f, h = batch_size, layout.frame_stack, layout.history_len
         obs_shape = (b, f * layout.frame_shape[0], *layout.frame_shape[1:])
@@ -61,7 +61,7 @@ class PrioritizedReplay:
     """
 
     def __init__(self, storage: ReplayStorage, zeta: float = 0.6, eta: float = 1e-5,
-                 seed: Optional[int] = 0, init_priority: str = "actor"):
+                 seed: int | None = 0, init_priority: str = "actor"):
         if init_priority not in ("actor", "max"):
             raise ValueError("init_priority must be 'actor' or 'max'")
         self.storage, self.zeta, self.eta = storage, float(zeta), float(eta)
@@ -129,7 +129,7 @@ class PrioritizedReplay:
         if self._pending:
             self._set(*self._drain())
 
-    def _drain(self, exclude: Optional[np.ndarray] = None):
+    def _drain(self, exclude: np.ndarray | None = None):
         """The queued (slots, p^zeta), minus slots that died since they were sampled (a zero
         leaf, or in ``exclude``): those stay dead; and minus slots that now hold another
         transition than the one sampled (its frame number moved on): the update is not its."""
@@ -168,7 +168,7 @@ class PrioritizedReplay:
         self.min_tree.update(slots, np.where(values > 0, values, np.inf))
 
     # -- learner ------------------------------------------------------------------------------
-    def sample(self, batch_size: int, beta: float, out: Optional[Batch] = None) -> Batch:
+    def sample(self, batch_size: int, beta: float, out: Batch | None = None) -> Batch:
         """A stratified prioritised batch; ``out`` (see :meth:`Batch.empty`) is filled in place
         (C-contiguous arrays of the right shapes: e.g. numpy views of pinned torch tensors)."""
         if self._pending:
@@ -209,7 +209,7 @@ class PrioritizedReplay:
             out.action[stale] = np.maximum(out.action[stale], 0)
         return out
 
-    def _drop_overwritten(self, idx: np.ndarray, weights: np.ndarray) -> Optional[np.ndarray]:
+    def _drop_overwritten(self, idx: np.ndarray, weights: np.ndarray) -> np.ndarray | None:
         """A writer may have lapped a sampled window while we gathered it: weight and priority 0.
         Returns the mask of such samples (None when there are none).
 

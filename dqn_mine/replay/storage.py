@@ -25,11 +25,11 @@ counters       [S, 8] i64           per stream: cursor, published, env steps, ep
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List, Optional, Tuple
 
 import numpy as np
 
-from dqn_mine.system.shared import BlockSpec, SharedBlocks
+from dqn_mine.env.interface import FRAME_SHAPE, NUM_ACTIONS
+from dqn_mine.shared import BlockSpec, SharedBlocks
 
 # columns of the counters block
 CURSOR, PUBLISHED, STEPS, EPISODES = 0, 1, 2, 3
@@ -45,12 +45,12 @@ class ReplayLayout:
 
     num_streams: int                               # one ring per environment stream
     stream_capacity: int                           # M: slots per stream
-    frame_shape: Tuple[int, ...] = (3, 44, 76)     # one RGB frame, channels first
+    frame_shape: tuple[int, ...] = FRAME_SHAPE     # one RGB frame, channels first
     history_len: int = 20                          # h: actions kept as the action history
     n_step: int = 6                                # n of the n-step return
     gamma: float = 0.99                            # discount per step
     frame_stack: int = 1                           # f: frames stacked into an observation
-    num_actions: int = 6                           # size of the Q vector an actor supplies
+    num_actions: int = NUM_ACTIONS                 # size of the Q vector an actor supplies
 
     def __post_init__(self):
         if not 1 <= self.n_step <= 254:
@@ -62,7 +62,7 @@ class ReplayLayout:
                              f"n_step {self.n_step} and frame_stack {self.frame_stack}")
 
     @classmethod
-    def from_capacity(cls, capacity: int, num_streams: int, **kw) -> "ReplayLayout":
+    def from_capacity(cls, capacity: int, num_streams: int, **kw) -> ReplayLayout:
         """Split ``capacity`` transitions evenly over ``num_streams`` rings (rounding down)."""
         return cls(num_streams=num_streams, stream_capacity=capacity // num_streams, **kw)
 
@@ -70,11 +70,7 @@ class ReplayLayout:
     def capacity(self) -> int:
         return self.num_streams * self.stream_capacity
 
-    @property
-    def frame_nbytes(self) -> int:
-        return int(np.prod(self.frame_shape))
-
-    def block_specs(self) -> List[BlockSpec]:
+    def block_specs(self) -> list[BlockSpec]:
         """Every shared array of the replay (``SharedBlocks.create`` allocates them)."""
         c, h = self.capacity, self.history_len
         return [
@@ -111,9 +107,6 @@ class ReplayStorage:
         """Environment steps published by all writers (the denominator of the replay ratio)."""
         return int(self.counters[:, STEPS].sum())
 
-    def episodes_written(self) -> int:
-        return int(self.counters[:, EPISODES].sum())
-
     def slot(self, stream: int, t):
         """Slot of frame number ``t`` of ``stream`` (int or int array)."""
         return stream * self.stream_capacity + t % self.stream_capacity
@@ -122,7 +115,7 @@ class ReplayStorage:
         """Slot of each transition's bootstrap frame s_{t+k} (same stream, ``boot_off`` later)."""
         return self.boot.take(slots).astype(np.int64)
 
-    def gather_obs(self, slots: np.ndarray, out: Optional[np.ndarray] = None) -> np.ndarray:
+    def gather_obs(self, slots: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Observations of ``slots``: uint8 [B, 3f, H, W], frames before the episode start zero."""
         f, fs = self.layout.frame_stack, self.layout.frame_shape
         b = slots.shape[0]

@@ -23,8 +23,6 @@ as fast.
 
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 
 
@@ -50,7 +48,7 @@ class SumTree:
         self._pairs = self.tree.reshape(-1, 2)         # _pairs[i] = children of node i
         self._top = min(self._TOP, self.depth)
         self._whole = max(self._top, min(self._WHOLE, self.depth))
-        self._cum: Optional[np.ndarray] = None         # [2^top + 1] exclusive prefix sums
+        self._cum: np.ndarray | None = None         # [2^top + 1] exclusive prefix sums
         self._total = 0.0
 
     @property
@@ -76,10 +74,6 @@ class SumTree:
             pair = self._pairs.take(i, axis=0)                      # [B, 2]
             self.tree[i] = pair[:, 0] + pair[:, 1]
         self._recompute(self._whole)
-
-    def rebuild(self) -> None:
-        """Recompute every kept node (after writing many leaves: cheaper than update)."""
-        self._recompute(self.depth)
 
     def _recompute(self, depth: int) -> None:
         """Recompute the levels above ``depth`` whole, up to the search's top level."""
@@ -156,7 +150,7 @@ class MinTree:
         if capacity < 1:
             raise ValueError("capacity must be >= 1")
         self.capacity = int(capacity)
-        self.ARITY = k = int(arity)
+        self.arity = k = int(arity)
         self.levels = []                   # levels[0] = leaves, levels[-1] = [root]
         n = self.capacity
         while True:                        # each level padded with +inf to a multiple of K
@@ -177,9 +171,6 @@ class MinTree:
         v.flags.writeable = False
         return v
 
-    def __getitem__(self, indices):
-        return self.levels[0][indices]
-
     def min(self) -> float:
         return float(self.levels[-1][0])
 
@@ -193,10 +184,5 @@ class MinTree:
             if level >= self._whole:
                 reduce(block, axis=1, out=self.levels[level][: block.shape[0]])
             else:
-                i = i // self.ARITY
+                i = i // self.arity
                 self.levels[level][i] = reduce(block.take(i, axis=0), axis=1)   # [B, K] -> [B]
-
-    def rebuild(self) -> None:
-        for level in range(1, len(self.levels)):
-            block = self._blocks[level - 1]
-            np.min(block, axis=1, out=self.levels[level][: block.shape[0]])

@@ -1,19 +1,19 @@
 """Run-wide control state shared by the runner, the learner and the actors.
 
-Every field has exactly one writer, so no lock is needed: the learner writes ``stop``, ``updates``
-and ``phase``; actor ``i`` writes its own row of ``actor_steps`` and of the episode ring. Episode
-records go through shared memory rather than a ``multiprocessing.Queue`` because a queue's pipe can
-be left half-written (and its lock held) by an actor killed mid-``put``; a ring of plain numbers
-cannot.
+Every field has exactly one writer, so no lock is needed: the runner's process writes ``stop``,
+``updates`` (the learner) and the curriculum's ``phase`` and ``num_rooms``; actor ``i`` writes its
+own row of ``actor_steps`` and of the episode ring. Episode records go through shared memory
+rather than a ``multiprocessing.Queue`` because a queue's pipe can be left half-written (and its
+lock held) by an actor killed mid-``put``; a ring of plain numbers cannot.
 """
 
 from __future__ import annotations
 
-from typing import List, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
-from dqn_mine.system.shared import BlockSpec, SharedBlocks
+from dqn_mine.shared import BlockSpec, SharedBlocks
 
 EPISODE_RING = 4096  # per actor; the learner drains far more often than actors finish this many
 
@@ -32,20 +32,22 @@ class Control:
     def __init__(self, blocks: SharedBlocks):
         self.stop_flag = blocks["ctl_stop"]            # [1] 0 run, 1 stop
         self.update_count = blocks["ctl_updates"]      # [1] learner updates done
-        self.phase_cell = blocks["ctl_phase"]          # [1] curriculum phase / schedule stage
+        self.phase_cell = blocks["ctl_phase"]          # [1] adaptive curriculum phase (0: none)
+        self.rooms_cell = blocks["ctl_rooms"]          # [1] scheduled room count (0: none)
         self.actor_steps = blocks["ctl_actor_steps"]   # [A] env steps per actor
         self.ep_ring = blocks["ctl_ep_ring"]           # [A, K, 4] return, length, phase, is_eval
         self.ep_written = blocks["ctl_ep_written"]     # [A] records written per actor
         self._ep_read = np.zeros(len(self.ep_written), dtype=np.int64)  # reader-local cursor
 
     @staticmethod
-    def specs(num_actors: int) -> List[BlockSpec]:
+    def specs(num_actors: int) -> list[BlockSpec]:
         """``num_actors`` counts every acting process, the evaluation actor included."""
         a = max(1, num_actors)
         return [
             BlockSpec("ctl_stop", (1,), "i8", fill=0),
             BlockSpec("ctl_updates", (1,), "i8", fill=0),
             BlockSpec("ctl_phase", (1,), "i8", fill=0),
+            BlockSpec("ctl_rooms", (1,), "i8", fill=0),
             BlockSpec("ctl_actor_steps", (a,), "i8", fill=0),
             BlockSpec("ctl_ep_ring", (a, EPISODE_RING, 4), "f8", fill=np.nan),
             BlockSpec("ctl_ep_written", (a,), "i8", fill=0),
@@ -71,9 +73,14 @@ class Control:
     def phase(self) -> int:
         return int(self.phase_cell[0])
 
-    @phase.setter
-    def phase(self, value: int) -> None:
-        self.phase_cell[0] = value
+    @property
+    def num_rooms(self) -> int:
+        return int(self.rooms_cell[0])
+
+    def show_curriculum(self, curriculum) -> None:
+        """Publish a :class:`~dqn_mine.system.curriculum.Curriculum`'s state to the actors."""
+        self.phase_cell[0] = curriculum.phase
+        self.rooms_cell[0] = curriculum.num_rooms or 0
 
     def total_actor_steps(self) -> int:
         return int(self.actor_steps.sum())
@@ -86,9 +93,9 @@ class Control:
         self.ep_ring[actor, n % EPISODE_RING] = (ret, length, phase, float(is_eval))
         self.ep_written[actor] = n + 1
 
-    def drain_episodes(self) -> List[Episode]:
+    def drain_episodes(self) -> list[Episode]:
         """Reader side (the learner): every record published since the last call."""
-        out: List[Episode] = []
+        out: list[Episode] = []
         for actor, written in enumerate(self.ep_written.copy()):
             start = max(int(self._ep_read[actor]), int(written) - EPISODE_RING)
             for n in range(start, int(written)):

@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import queue
 import threading
-from typing import Callable, Optional
+from typing import Callable
 
 import numpy as np
 
-from dqn_mine.config import Config, resolve_learner_precision
+from dqn_mine.config import Config, network_shape, resolve_learner_precision
 
 
 class BatchSource:
@@ -24,8 +24,8 @@ class BatchSource:
                  queue_size: int = 4, threaded: bool = True):
         self.replay, self.batch_size, self.beta, self.to_device = replay, batch_size, beta, \
             to_device
-        self.ready: "queue.Queue" = queue.Queue(maxsize=queue_size)
-        self.error: Optional[BaseException] = None
+        self.ready: queue.Queue = queue.Queue(maxsize=queue_size)
+        self.error: BaseException | None = None
         self._stop = threading.Event()
         self._thread = None
         if threaded:
@@ -78,10 +78,15 @@ class BatchSource:
 
 
 class Learner:
-    """The update loop's state: network updater, batch source, weight publishing."""
+    """The update loop: network updater, batch source, weight publishing, and the update count.
+
+    The runner talks to it through :meth:`ingest` (pre-fill), :meth:`step`, :meth:`publish`,
+    :meth:`state_dict` / :meth:`load_state` (checkpoints), :meth:`save_replay` and the counters
+    ``updates`` and ``new_updates``; ``control.updates`` mirrors ``updates`` for the actors.
+    """
 
     def __init__(self, cfg: Config, storage, control, weights, device: str,
-                 threaded: bool = True, replay_snapshot: Optional[str] = None):
+                 threaded: bool = True, replay_snapshot: str | None = None):
         """``replay_snapshot``: a saved replay to read back (before the prefetch thread starts
         sampling); ``restored`` then holds its live transitions."""
         from dqn_mine.agent.learning import DQNUpdater, batch_to_device
@@ -89,7 +94,7 @@ class Learner:
         from dqn_mine.replay import PrioritizedReplay
 
         self.cfg, self.control, self.weights, self.device = cfg, control, weights, device
-        net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
+        net = DuelingQNetwork(**network_shape(cfg))
         self.updater = DQNUpdater(net, lr=cfg.lr, target_update_interval=cfg.target_update_interval,
                                   device=device, max_grad_norm=cfg.max_grad_norm,
                                   precision=resolve_learner_precision(cfg.learner_precision,
@@ -101,11 +106,25 @@ class Learner:
             from dqn_mine.replay import snapshot
 
             self.restored = snapshot.load(replay_snapshot, storage, self.replay)
-        self.updates = 0
+        self.updates = 0            # of the whole run, resumes included
+        self.first_update = 0       # ``updates`` when this process started (0, or a checkpoint's)
         self.source = BatchSource(
             self.replay, cfg.batch_size, beta=self.beta,
             to_device=lambda b: batch_to_device(b, device), queue_size=cfg.learner_queue,
             threaded=threaded)
+
+    @property
+    def new_updates(self) -> int:
+        """Updates made by this process (a resumed run's budget and rates count only these)."""
+        return self.updates - self.first_update
+
+    def replay_size(self) -> int:
+        """Live transitions in the replay."""
+        return len(self.replay)
+
+    def ingest(self) -> int:
+        """Take in what the actors published, before the sampling thread starts (pre-fill)."""
+        return self.source.ingest()
 
     def beta(self) -> float:
         from dqn_mine.replay import beta_at
@@ -117,13 +136,17 @@ class Learner:
         # The optimiser's state carries the old learning rate; a resumed run's --lr wins.
         for group in self.updater.optimizer.param_groups:
             group["lr"] = self.cfg.lr
-        self.updates = int(state["counters"]["updates"])
+        self.updates = self.first_update = int(state["counters"]["updates"])
         self.control.updates = self.updates
+
+    def state_dict(self) -> dict:
+        """Network, target and optimiser (what a checkpoint keeps of the learner)."""
+        return self.updater.state_dict()
 
     def publish(self) -> None:
         self.weights.publish(self.updater.online)
 
-    def step(self) -> Optional[dict]:
+    def step(self) -> dict | None:
         """One network update; None if no batch was ready."""
         item = self.source.get()
         if item is None:

@@ -1,50 +1,40 @@
-"""The run: allocate shared memory, start the actors, pre-fill, train, stop cleanly.
+"""The run's lifecycle: build its parts, pre-fill, train, stop cleanly.
 
 The learner runs in the runner's own process (it owns the GPU and the progress bar); actors are
 spawned processes, or plain objects stepped inline in serial mode (tests, debugging). Whatever
-happens (finished, Ctrl-C, SIGTERM, a dead actor, an exception), the `finally` path stops every
+happens (finished, Ctrl-C, SIGTERM, a dead actor, an exception), the ``finally`` path stops every
 actor, writes a resumable checkpoint and unlinks every shared segment.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
-import multiprocessing as mp
 import signal
-import sys
 import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
-from typing import List, Optional
 
-from dqn_mine.config import Config, learner_threads, resolve_device
-from dqn_mine.metrics import MetricsTable, RateMeter, Rolling, progress_postfix
+from dqn_mine import checkpoint as ckpt
+from dqn_mine.config import Config, learner_threads
+from dqn_mine.exitcodes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
+from dqn_mine.metrics import MetricsTable, RateMeter, progress_postfix
 from dqn_mine.replay.snapshot import SnapshotError
-from dqn_mine.system import checkpoint as ckpt
-from dqn_mine.system.actor import (Actor, actor_main, actor_specs, first_error, initial_phase,
-                                   learner_may_update, prefill_target)
-from dqn_mine.system.control import Control
-from dqn_mine.system.layout import replay_layout, run_block_specs
-from dqn_mine.system.learner import Learner
-from dqn_mine.system.shared import SharedBlocks
-
-EXIT_OK, EXIT_FAILED, EXIT_INTERRUPTED = 0, 1, 130
+from dqn_mine.system.context import RunContext
+from dqn_mine.system.curriculum import Curriculum
+from dqn_mine.system.episodes import EpisodeStats
+from dqn_mine.system.pacing import learner_may_update, prefill_target
+from dqn_mine.system.pool import ActorFailure
 
 
-def saved_replay(cfg: Config) -> Optional[str]:
+def saved_replay(cfg: Config) -> str | None:
     """``--save-replay``'s folder when a resumed run has a replay saved there, else None."""
     from dqn_mine.replay import snapshot
 
     if cfg.resume and cfg.save_replay and snapshot.exists(cfg.save_replay):
         return cfg.save_replay
     return None
-
-
-class ActorFailure(RuntimeError):
-    """An actor process raised or died; the message names it and the cause."""
 
 
 @dataclass
@@ -69,10 +59,10 @@ class StopSignals:
     """SIGINT/SIGTERM set a flag the loops poll, so shutdown always runs the same clean path."""
 
     def __init__(self):
-        self.received: Optional[str] = None
+        self.received: str | None = None
         self._old = {}
 
-    def __enter__(self) -> "StopSignals":
+    def __enter__(self) -> StopSignals:
         for sig in (signal.SIGINT, signal.SIGTERM):
             self._old[sig] = signal.signal(sig, self._handle)
         return self
@@ -87,92 +77,17 @@ class StopSignals:
             signal.signal(sig, handler)
 
 
-class ProcessActors:
-    """Training actors as spawned processes (spawn: EGL contexts and CUDA do not survive fork)."""
-
-    def __init__(self, cfg: Config, handle: tuple, generation: int = 0):
-        ctx = mp.get_context("spawn")
-        # One pipe per actor for its error report: unlike a Queue it has no named semaphore to
-        # leak when an actor is killed.
-        self.errors = []
-        self.procs: List[mp.Process] = []
-        for spec in actor_specs(cfg, generation):
-            receive, send = ctx.Pipe(duplex=False)
-            p = ctx.Process(target=actor_main, args=(cfg, spec, handle, send),
-                            name=f"dqn_mine-actor-{spec.index}", daemon=True)
-            p.start()
-            send.close()
-            self.errors.append(receive)
-            self.procs.append(p)
-
-    def advance(self) -> None:
-        """Processes act on their own; only their health needs checking."""
-        self.check()
-
-    def check(self) -> None:
-        for i, p in enumerate(self.procs):
-            err = first_error(self.errors[i])
-            if err is not None:
-                index, line, trace = err
-                print(trace, file=sys.stderr)
-                raise ActorFailure(f"actor {index} failed: {line}")
-            if p.exitcode is not None:
-                how = (f"killed by {signal.Signals(-p.exitcode).name}" if p.exitcode < 0
-                       else f"exit code {p.exitcode}")
-                raise ActorFailure(f"actor {i} died ({how})")
-
-    def stop(self, timeout: float = 10.0) -> None:
-        deadline = time.monotonic() + timeout
-        for p in self.procs:
-            p.join(max(0.1, deadline - time.monotonic()))
-        for p in self.procs:
-            if p.is_alive():
-                p.terminate()
-                p.join(2)
-            if p.is_alive():
-                p.kill()
-                p.join(2)
-        for conn in self.errors:
-            conn.close()
-
-
-class InlineActors:
-    """Serial mode: the same actors, stepped in this process between learner updates."""
-
-    def __init__(self, cfg: Config, storage, control, weights, generation: int = 0):
-        self.cfg, self.control = cfg, control
-        self.actors = [Actor(cfg, spec, storage, control, weights)
-                       for spec in actor_specs(cfg, generation)]
-        self.next_eval = cfg.eval_every
-
-    def advance(self) -> None:
-        for actor in self.actors:
-            if not actor.spec.streams:
-                self._maybe_evaluate(actor)
-            elif actor.steps < actor.allowed_steps():
-                actor.step()
-
-    def _maybe_evaluate(self, actor: Actor) -> None:
-        if self.control.total_actor_steps() >= self.next_eval:
-            actor.evaluate(self.cfg.eval_episodes)
-            self.next_eval = max(self.next_eval, self.control.total_actor_steps()) \
-                + self.cfg.eval_every
-
-    def check(self) -> None:
-        pass
-
-    def stop(self, timeout: float = 0.0) -> None:
-        for actor in self.actors:
-            actor.close()
+# Sums over the log interval of what each update reports.
+UPDATE_STATS = ("loss", "mean_q", "td_abs", "sampled_reward")
 
 
 class Run:
     """One training run; ``execute()`` returns its :class:`Summary`."""
 
-    def __init__(self, cfg: Config, run_dir: Path, state: Optional[dict] = None,
+    def __init__(self, cfg: Config, run_dir: Path, state: dict | None = None,
                  serial: bool = False, progress: bool = True):
-        # cfg is what this process runs with (a restored replay sets its pre-fill to 0);
-        # saved_cfg is what checkpoints record.
+        # cfg is what this process runs with (a restored replay sets its pre-fill to 0, see
+        # RunContext.start); saved_cfg is what checkpoints record.
         self.cfg = self.saved_cfg = cfg
         self.run_dir, self.state = Path(run_dir), state
         self.serial, self.progress = serial, progress
@@ -181,18 +96,16 @@ class Run:
         # resumed run does not replay the episodes it has already seen.
         self.generation = int(counters.get("generation", -1)) + 1 if state else 0
         self.steps_offset = int(counters.get("env_steps", 0))
-        self.episodes = int(counters.get("episodes", 0))
         self.time_offset = float(counters.get("wall_time", 0.0))
-        self.returns = Rolling(cfg.return_window)
-        self.lengths = Rolling(cfg.return_window)
-        self.eval_returns = Rolling(cfg.eval_episodes)
-        self.eval_lengths = Rolling(cfg.eval_episodes)
-        self.curriculum_returns = Rolling(cfg.curriculum_window)
-        self.phase = int(counters.get("phase", initial_phase(cfg)))
-        self.first_update = int(counters.get("updates", 0))
-        self.train_started: Optional[float] = None   # monotonic time the update loop began
-        self.train_start_steps = 0
+        self.stats = EpisodeStats(cfg, episodes=int(counters.get("episodes", 0)))
+        self.curriculum = Curriculum(cfg, phase=counters.get("phase"),
+                                     updates=int(counters.get("updates", 0)))
+        self.ctx: RunContext | None = None
+        self.metrics: MetricsTable | None = None
+        self.signals = StopSignals()
         self.started = time.monotonic()
+        self.train_started: float | None = None   # monotonic time the update loop began
+        self.train_start_steps = 0
         self.reason = "finished"
         self.keep_checkpoint = False
 
@@ -200,90 +113,46 @@ class Run:
     def wall_time(self) -> float:
         return self.time_offset + time.monotonic() - self.started
 
+    def actor_steps(self) -> int:
+        """Env steps the training actors of this process have taken."""
+        return self.ctx.control.total_actor_steps() if self.ctx else 0
+
     def env_steps(self) -> int:
-        return self.steps_offset + self.control.total_actor_steps()
+        return self.steps_offset + self.actor_steps()
+
+    def updates(self) -> int:
+        learner = self.ctx.learner if self.ctx else None
+        return learner.updates if learner else 0
 
     def counters(self) -> dict:
-        return {"updates": self.learner.updates, "env_steps": self.env_steps(),
-                "episodes": self.episodes, "wall_time": self.wall_time(), "phase": self.phase,
+        return {"updates": self.updates(), "env_steps": self.env_steps(),
+                "episodes": self.stats.episodes, "wall_time": self.wall_time(),
+                "phase": self.curriculum.phase, "num_rooms": self.curriculum.num_rooms,
                 "generation": self.generation}
 
     def drain_episodes(self) -> None:
-        for ep in self.control.drain_episodes():
-            if ep.is_eval:
-                self.eval_returns.extend([ep.ret])
-                self.eval_lengths.extend([ep.length])
-                continue
-            self.episodes += 1
-            self.returns.extend([ep.ret])
-            self.lengths.extend([ep.length])
-            if ep.phase == self.phase:
-                self.curriculum_returns.extend([ep.ret])
-        self.advance_curriculum()
-
-    def advance_curriculum(self) -> None:
-        """Adaptive phases: one phase harder once the rolling mean return of the last
-        ``curriculum_window`` episodes (all of the current phase) exceeds the threshold; the
-        scheduled room counts: by the share of updates done."""
-        cfg = self.cfg
-        if cfg.curriculum == "adaptive" and self.phase > 1 \
-                and len(self.curriculum_returns) == cfg.curriculum_window \
-                and self.curriculum_returns.mean > cfg.curriculum_threshold:
-            self.phase -= 1
-            self.curriculum_returns.clear()
-        elif cfg.curriculum == "schedule" and hasattr(self, "learner"):
-            stages = cfg.rooms_schedule
-            stage = min(len(stages) - 1, self.learner.updates * len(stages) // max(1, cfg.updates))
-            self.phase = int(stages[stage])
-        self.control.phase = self.phase
+        """Take in the finished episodes; the curriculum follows, the actors read it back."""
+        for ep in self.ctx.control.drain_episodes():
+            if self.stats.add(ep):
+                self.curriculum.record(ep.phase, ep.ret)
+        self.curriculum.advance(self.updates())
+        self.ctx.control.show_curriculum(self.curriculum)
 
     # -- phases of the run -------------------------------------------------------------------
     def execute(self) -> Summary:
         import torch
 
-        from dqn_mine.agent.network import DuelingQNetwork
-        from dqn_mine.replay import ReplayStorage
-        from dqn_mine.system.weights import WeightBroadcast
-
-        device = resolve_device(self.cfg.device)
         torch.set_num_threads(learner_threads(self.cfg))
-        template = DuelingQNetwork(frame_stack=self.cfg.frame_stack,
-                                   history_len=self.cfg.history_len)
-        blocks = SharedBlocks.create(run_block_specs(self.cfg, template))
-        self.actors = None
+        self.ctx = RunContext(self.cfg)
         code = EXIT_OK
         try:
-            with StopSignals() as self.signals:
+            with self.signals:
                 torch.manual_seed(self.cfg.seed)
-                self.control = Control(blocks)
-                self.control.phase = self.phase
-                storage = ReplayStorage(replay_layout(self.cfg), blocks)
-                weights = WeightBroadcast(blocks)
-                self.learner = Learner(self.cfg, storage, self.control, weights, device,
-                                       threaded=not self.serial,
-                                       replay_snapshot=self.replay_to_restore())
-                if self.learner.restored:
-                    print(f"read {self.learner.restored:,} transitions back from "
-                          f"{self.cfg.save_replay}: no pre-fill", flush=True)
-                    self.cfg = dataclasses.replace(self.cfg, prefill=0)
-                if self.state:
-                    self.learner.load_state(self.state)
-                self.learner.publish()  # actors start from the learner's weights
-                self.actors = (
-                    InlineActors(self.cfg, storage, self.control, weights, self.generation)
-                    if self.serial else
-                    ProcessActors(self.cfg, blocks.handle(), self.generation))
-                self.metrics = MetricsTable(
-                    self.run_dir / "metrics.csv",
-                    self.run_dir / "tb" if self.cfg.tensorboard else None,
-                    # indented: TensorBoard's text tab shows it as a code block
-                    "\n".join("    " + line for line in
-                              json.dumps(self.cfg.to_dict(), indent=1).splitlines()))
-                try:
-                    self.prefill()
-                    self.train()
-                finally:
-                    self.metrics.close()
+                self.ctx.control.show_curriculum(self.curriculum)
+                self.ctx.start(self.state, self.replay_to_restore(), self.generation,
+                               self.serial)
+                self.cfg = self.ctx.cfg
+                self.prefill_and_train()
                 if self.signals.received:
                     code, self.reason = EXIT_INTERRUPTED, f"stopped by {self.signals.received}"
         except ActorFailure as exc:
@@ -297,15 +166,28 @@ class Run:
             self.keep_checkpoint = True
         finally:
             self.shutdown()
-            blocks.close()
+            self.ctx.close()
         return self.summary(code)
 
-    def replay_to_restore(self) -> Optional[str]:
+    def replay_to_restore(self) -> str | None:
         """The saved replay a resumed run reads back, if it has one."""
         path = saved_replay(self.cfg)
         if self.cfg.resume and self.cfg.save_replay and path is None:
             print(f"no saved replay in {self.cfg.save_replay}: pre-filling anew", flush=True)
         return path
+
+    def prefill_and_train(self) -> None:
+        self.metrics = MetricsTable(
+            self.run_dir / "metrics.csv",
+            self.run_dir / "tb" if self.cfg.tensorboard else None,
+            # indented: TensorBoard's text tab shows it as a code block
+            "\n".join("    " + line for line in
+                      json.dumps(self.cfg.to_dict(), indent=1).splitlines()))
+        try:
+            self.prefill()
+            self.train()
+        finally:
+            self.metrics.close()
 
     def _should_stop(self) -> bool:
         return self.signals.received is not None
@@ -314,9 +196,9 @@ class Run:
         target = prefill_target(self.cfg)
         bar = self._bar(total=target, desc="pre-fill", unit="step")
         while not self._should_stop():
-            self.actors.advance()
-            self.learner.source.ingest()
-            done = self.control.total_actor_steps()
+            self.ctx.actors.advance()
+            self.ctx.learner.ingest()
+            done = self.actor_steps()
             bar.update(min(done, target) - bar.n)
             if done >= target:
                 break
@@ -324,22 +206,20 @@ class Run:
                 time.sleep(0.05)
         bar.close()
         self.drain_episodes()
-        self.train_start_steps = self.control.total_actor_steps()
+        self.train_start_steps = self.actor_steps()
 
     def learner_may_update(self) -> bool:
         """Under a fixed replay ratio the learner waits for enough new transitions."""
-        return learner_may_update(self.cfg, self.learner.updates - self.first_update,
-                                  self.control.total_actor_steps())
+        return learner_may_update(self.cfg, self.ctx.learner.new_updates, self.actor_steps())
 
     def train(self) -> None:
-        cfg, learner = self.cfg, self.learner
+        cfg, learner = self.cfg, self.ctx.learner
         self.train_started = time.monotonic()
         bar = self._bar(total=cfg.updates, initial=learner.updates, desc="train", unit="upd")
-        upd_rate = RateMeter(learner.updates)
-        step_rate = RateMeter(self.control.total_actor_steps())
-        agg = {"loss": [], "mean_q": [], "td_abs": [], "sampled_reward": []}
+        rates = RateMeter(learner.updates), RateMeter(self.actor_steps())
+        agg = {key: [] for key in UPDATE_STATS}
         while learner.updates < cfg.updates and not self._should_stop():
-            self.actors.advance()
+            self.ctx.actors.advance()
             if not self.learner_may_update():
                 if not self.serial:
                     time.sleep(0.001)
@@ -354,76 +234,66 @@ class Run:
             for key in agg:
                 agg[key].append(float(stats[key]))
             if learner.updates % cfg.log_interval == 0 or learner.updates == cfg.updates:
-                row = self.log_row(agg, upd_rate, step_rate)
+                row = self.log_row(agg, *rates)
                 bar.set_postfix(progress_postfix(row), refresh=False)
-                agg = {k: [] for k in agg}
+                agg = {key: [] for key in UPDATE_STATS}
             if learner.updates % cfg.checkpoint_interval == 0:
                 self.save_checkpoint()
         if agg["loss"]:  # stopped between log rows (Ctrl-C): the updates since get a row too
-            self.log_row(agg, upd_rate, step_rate)
+            self.log_row(agg, *rates)
         bar.close()
 
     def log_row(self, agg: dict, upd_rate: RateMeter, step_rate: RateMeter) -> dict:
         self.drain_episodes()
-        steps = self.control.total_actor_steps()
-        row = {"update": self.learner.updates, "wall_time": round(self.wall_time(), 3),
-               "env_steps": self.env_steps(), "episodes": self.episodes,
-               "episode_return": self.returns.mean, "episode_length": self.lengths.mean,
-               "eval_return": self.eval_returns.mean, "eval_length": self.eval_lengths.mean,
-               "updates_per_s": upd_rate.rate(self.learner.updates),
-               "env_steps_per_s": step_rate.rate(steps),
-               "replay_ratio": self.replay_ratio(), "phase": self.control.phase,
-               "beta": self.learner.beta(),
-               "replay_size": len(self.learner.replay),
-               "phase_return": (self.curriculum_returns.mean if self.cfg.curriculum == "adaptive"
-                                else math.nan)}
+        learner, stats = self.ctx.learner, self.stats
+        row = {"update": learner.updates, "wall_time": round(self.wall_time(), 3),
+               "env_steps": self.env_steps(), "episodes": stats.episodes,
+               "episode_return": stats.returns.mean, "episode_length": stats.lengths.mean,
+               "eval_return": stats.eval_returns.mean, "eval_length": stats.eval_lengths.mean,
+               "updates_per_s": upd_rate.rate(learner.updates),
+               "env_steps_per_s": step_rate.rate(self.actor_steps()),
+               "replay_ratio": self.replay_ratio(), "phase": self.curriculum.logged_phase,
+               "beta": learner.beta(), "replay_size": learner.replay_size(),
+               "phase_return": self.curriculum.phase_return}
         row.update({k: (sum(v) / len(v) if v else math.nan) for k, v in agg.items()})
         self.metrics.write(row)
         return row
 
     def replay_ratio(self) -> float:
         """Updates per transition generated since the learner started."""
-        new = self.control.total_actor_steps() - self.train_start_steps
-        return (self.learner.updates - self.first_update) / new if new > 0 else math.nan
+        new = self.actor_steps() - self.train_start_steps
+        return self.ctx.learner.new_updates / new if new > 0 else math.nan
 
     # -- end ---------------------------------------------------------------------------------
     def save_checkpoint(self) -> None:
-        ckpt.save(self.run_dir, self.learner.updater.state_dict(), self.counters(),
-                  self.saved_cfg)
+        ckpt.save(self.run_dir, self.ctx.learner.state_dict(), self.counters(), self.saved_cfg)
 
     def shutdown(self) -> None:
-        control = getattr(self, "control", None)
-        if control is not None:
-            control.request_stop()
-        if self.actors is not None:
-            self.actors.stop()
-        learner = getattr(self, "learner", None)
-        if learner is not None:
-            learner.close()
-            self.drain_episodes()
-            if not self.keep_checkpoint:
-                self.save_checkpoint()
-                if self.cfg.save_replay:
-                    self.learner.save_replay(self.cfg.save_replay)
+        """Stop the actors and the learner; keep what the run learned (checkpoint, replay)."""
+        self.ctx.stop()
+        if self.ctx.learner is None:
+            return
+        self.drain_episodes()
+        if not self.keep_checkpoint:
+            self.save_checkpoint()
+            if self.cfg.save_replay:
+                self.ctx.learner.save_replay(self.cfg.save_replay)
 
     def summary(self, code: int) -> Summary:
-        learner = getattr(self, "learner", None)
-        updates = learner.updates if learner else 0
-        control = getattr(self, "control", None)
-        wall = self.wall_time()
-        steps = self.env_steps() if control is not None else self.steps_offset
+        learner = self.ctx.learner
         run_time = max(1e-9, time.monotonic() - self.started)
         # updates/s over the training phase only, as the bar and metrics.csv measure it (start-up
         # and pre-fill excluded; a resumed run counts only its own updates)
         learn_time = 0.0 if self.train_started is None else time.monotonic() - self.train_started
-        new_updates = updates - self.first_update
+        new_updates = learner.new_updates if learner else 0
+        steps = self.env_steps()
         return Summary(run_dir=str(self.run_dir), exit_code=code, reason=self.reason,
-                       updates=updates, env_steps=steps, episodes=self.episodes, wall_time=wall,
-                       episode_return=self.returns.mean,
+                       updates=self.updates(), env_steps=steps, episodes=self.stats.episodes,
+                       wall_time=self.wall_time(), episode_return=self.stats.returns.mean,
                        updates_per_s=new_updates / learn_time if learn_time > 0 else 0.0,
                        env_steps_per_s=(steps - self.steps_offset) / run_time,
-                       replay_ratio=self.replay_ratio() if learner and control is not None
-                       else math.nan, return_episodes=len(self.returns))
+                       replay_ratio=self.replay_ratio() if learner else math.nan,
+                       return_episodes=len(self.stats.returns))
 
     def _bar(self, **kwargs):
         from tqdm import tqdm

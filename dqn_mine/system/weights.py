@@ -17,19 +17,18 @@ numpy calls between the counter and the data are no compiler-reorderable unit ei
 from __future__ import annotations
 
 import time
-from typing import List, Optional
 
 import numpy as np
 import torch
 from torch import nn
 
-from dqn_mine.system.shared import BlockSpec, SharedBlocks
+from dqn_mine.shared import BlockSpec, SharedBlocks
 
 WEIGHTS = "weights"
 SEQ = "weights_seq"
 
 
-def _tensors(net: nn.Module) -> List[torch.Tensor]:
+def _tensors(net: nn.Module) -> list[torch.Tensor]:
     """The floating tensors of ``net`` that travel, in a fixed (state_dict) order."""
     return [t for t in net.state_dict().values() if t.is_floating_point()]
 
@@ -45,10 +44,10 @@ class WeightBroadcast:
         self.flat_np = blocks[WEIGHTS]  # float32 [P]
         self.flat = torch.from_numpy(self.flat_np)  # float32 [P], shares memory with the block
         self.seq = blocks[SEQ]  # int64 [1]
-        self._scratch: Optional[torch.Tensor] = None  # reader's private copy, float32 [P]
+        self._scratch: torch.Tensor | None = None  # reader's private copy, float32 [P]
 
     @staticmethod
-    def specs(net: nn.Module) -> List[BlockSpec]:
+    def specs(net: nn.Module) -> list[BlockSpec]:
         return [BlockSpec(WEIGHTS, (num_values(net),), "float32", fill=np.nan),
                 BlockSpec(SEQ, (1,), "int64", fill=0)]
 
@@ -73,7 +72,7 @@ class WeightBroadcast:
         return int(self.seq[0]) // 2
 
     # -- actor side --------------------------------------------------------------------------
-    def pull(self, net: nn.Module, last_version: int, timeout: float = 5.0) -> Optional[int]:
+    def pull(self, net: nn.Module, last_version: int, timeout: float = 5.0) -> int | None:
         """Load the published weights into ``net`` if the version moved past ``last_version``.
 
         Returns the version loaded, or None when there is nothing new (or nothing published yet,

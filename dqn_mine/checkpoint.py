@@ -8,6 +8,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from dqn_mine.config import NETWORK_SHAPE
+
 FILENAME = "checkpoint.pt"
 FORMAT = 1
 
@@ -44,6 +46,6 @@ def load(path: Path, map_location: str = "cpu") -> dict:
     if not isinstance(state, dict) or state.get("format") != FORMAT \
             or not isinstance(state.get("updater"), dict) or "online" not in state["updater"] \
             or not isinstance(state.get("config"), dict) \
-            or not {"frame_stack", "history_len"} <= set(state["config"]):
+            or not set(NETWORK_SHAPE) <= set(state["config"]):
         raise CheckpointError(f"{path} is not a dqn_mine checkpoint")
     return state

@@ -16,9 +16,9 @@ from __future__ import annotations
 import mmap
 import os
 import secrets
+from collections.abc import Iterable
 from dataclasses import dataclass
 from multiprocessing import shared_memory
-from typing import Dict, Iterable, Optional, Tuple
 
 import numpy as np
 
@@ -40,9 +40,9 @@ class BlockSpec:
     """
 
     name: str
-    shape: Tuple[int, ...]
+    shape: tuple[int, ...]
     dtype: str
-    fill: Optional[float] = None
+    fill: float | None = None
 
     @property
     def nbytes(self) -> int:
@@ -53,7 +53,7 @@ def _human(nbytes: int) -> str:
     return f"{nbytes / 2**30:.2f} GiB" if nbytes >= 2**28 else f"{nbytes / 2**20:.1f} MiB"
 
 
-def shm_free_bytes(path: str = SHM_DIR) -> Optional[int]:
+def shm_free_bytes(path: str = SHM_DIR) -> int | None:
     """Free bytes in the shared-memory filesystem, or None where there is no such directory."""
     try:
         st = os.statvfs(path)
@@ -89,27 +89,27 @@ def _own_mapping(seg: shared_memory.SharedMemory) -> mmap.mmap:
 class SharedBlocks:
     """A set of named numpy arrays living in shared memory."""
 
-    def __init__(self, specs: Iterable[BlockSpec], names: Dict[str, str],
-                 segments: Dict[str, shared_memory.SharedMemory], owner: bool):
+    def __init__(self, specs: Iterable[BlockSpec], names: dict[str, str],
+                 segments: dict[str, shared_memory.SharedMemory], owner: bool):
         self.specs = {s.name: s for s in specs}
         self._names = names
         self._segments = segments
         self.owner = owner
-        self.arrays: Dict[str, np.ndarray] = {
+        self.arrays: dict[str, np.ndarray] = {
             s.name: np.ndarray(s.shape, dtype=s.dtype, buffer=_own_mapping(segments[s.name]))
             for s in self.specs.values()
         }
 
     # -- creation and attachment -------------------------------------------------------------
     @classmethod
-    def create(cls, specs: Iterable[BlockSpec]) -> "SharedBlocks":
+    def create(cls, specs: Iterable[BlockSpec]) -> SharedBlocks:
         """Allocate every block (after checking /dev/shm has room); the caller owns them."""
         specs = list(specs)
         if len({s.name for s in specs}) != len(specs):
             raise ValueError("duplicate shared block names")
         check_free_space(sum(s.nbytes for s in specs))
         token = f"{SHM_PREFIX}{os.getpid()}_{secrets.token_hex(4)}_"
-        segments: Dict[str, shared_memory.SharedMemory] = {}
+        segments: dict[str, shared_memory.SharedMemory] = {}
         try:
             for s in specs:
                 segments[s.name] = shared_memory.SharedMemory(
@@ -130,7 +130,7 @@ class SharedBlocks:
         return (tuple(self.specs.values()), dict(self._names))
 
     @classmethod
-    def attach(cls, handle: tuple) -> "SharedBlocks":
+    def attach(cls, handle: tuple) -> SharedBlocks:
         specs, names = handle
         segments = {}
         for s in specs:
@@ -161,7 +161,7 @@ class SharedBlocks:
                     pass
         self._segments = {}
 
-    def __enter__(self) -> "SharedBlocks":
+    def __enter__(self) -> SharedBlocks:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -1,0 +1,98 @@
+"""The curriculum: which phase, or how many rooms, the training episodes start with.
+
+Two kinds (``--curriculum``):
+
+- ``adaptive`` (two-room and three-room): ``phase`` runs from the task's easiest phase down to 1,
+  the full task. It moves one phase harder once the mean return of the last ``window`` episodes,
+  all started in the current phase, exceeds ``threshold``. With ``review`` > 0 a share of the
+  episodes starts in an easier phase already passed (see :meth:`Curriculum.review_phase`).
+- ``schedule`` (the rooms task): ``num_rooms`` follows the room counts of the schedule, each for
+  an equal share of the updates.
+
+The object holds no processes and no shared memory: the runner feeds it finished episodes and the
+update count and copies ``phase`` and ``num_rooms`` to the shared control block; every actor
+builds its own copy from the config and asks it how to start an episode.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dqn_mine.config import Config
+from dqn_mine.env.tasks import TASK_PHASES
+from dqn_mine.metrics import Rolling
+
+
+class Curriculum:
+    """State of a run's curriculum; ``kind`` is "none", "adaptive" or "schedule"."""
+
+    def __init__(self, cfg: Config, phase: int | None = None, updates: int = 0):
+        """``phase``: a resumed run's adaptive phase (None: start at the easiest); ``updates``:
+        the updates already made (the schedule's position)."""
+        self.kind = cfg.curriculum
+        self.threshold, self.review = cfg.curriculum_threshold, cfg.curriculum_review
+        self.rooms_schedule = tuple(cfg.rooms_schedule)
+        self.total_updates = cfg.updates
+        self.easiest = max(TASK_PHASES[cfg.task]) if self.kind == "adaptive" else 0
+        # adaptive: the current phase (1 = the full task); 0 without the adaptive curriculum
+        self.phase = self.easiest if phase is None or self.kind != "adaptive" else int(phase)
+        # schedule: the current room count; None without the schedule
+        self.num_rooms: int | None = None
+        self.window = cfg.curriculum_window
+        self.returns = Rolling(self.window)             # current phase's episodes only
+        self._follow_schedule(updates)
+
+    # -- the runner's side ---------------------------------------------------------------------
+    def record(self, phase: int, ret: float) -> None:
+        """A training episode that started in ``phase`` ended with return ``ret``."""
+        if phase == self.phase:
+            self.returns.extend([ret])
+
+    def advance(self, updates: int) -> None:
+        """After a batch of recorded episodes: one phase harder when the rolling mean of the
+        last ``window`` episodes of the current phase exceeds the threshold; the schedule's room
+        count for ``updates`` updates."""
+        if self.kind == "adaptive" and self.phase > 1 and len(self.returns) == self.window \
+                and self.returns.mean > self.threshold:
+            self.phase -= 1
+            self.returns.clear()
+        self._follow_schedule(updates)
+
+    def _follow_schedule(self, updates: int) -> None:
+        if self.kind != "schedule":
+            return
+        stages = self.rooms_schedule
+        stage = min(len(stages) - 1, updates * len(stages) // max(1, self.total_updates))
+        self.num_rooms = int(stages[stage])
+
+    @property
+    def phase_return(self) -> float:
+        """Rolling mean return of the current phase (NaN without the adaptive curriculum)."""
+        return self.returns.mean if self.kind == "adaptive" else float("nan")
+
+    @property
+    def logged_phase(self) -> int:
+        """What metrics.csv's ``phase`` column shows: the phase, or the scheduled room count."""
+        return self.num_rooms if self.kind == "schedule" else self.phase
+
+    # -- an actor's side -----------------------------------------------------------------------
+    def episode_start(self, phase: int, num_rooms: int, rng: np.random.Generator) -> tuple:
+        """(phase recorded with the episode, environment settings) for an episode that starts
+        while the shared state says ``phase`` and ``num_rooms``."""
+        if self.kind == "adaptive":
+            phase = self.review_phase(phase, rng)
+            return phase, {"phase": phase}
+        if self.kind == "schedule":
+            return phase, {"num_rooms": num_rooms}
+        return phase, {}
+
+    def review_phase(self, phase: int, rng: np.random.Generator) -> int:
+        """The phase an episode starts in: with probability ``review`` an easier one already
+        passed (uniformly), else ``phase``. Reviewed episodes keep the rewards of the skills the
+        current phase builds on flowing into the replay after a switch (without them the replay
+        soon holds only the new phase's failures and what was learned decays); only episodes of
+        the current phase count towards the next switch. No random number is drawn without
+        review, so the study's rule draws the same episodes as before review existed."""
+        if phase >= self.easiest or self.review == 0 or not rng.random() < self.review:
+            return phase
+        return int(rng.integers(phase + 1, self.easiest + 1))

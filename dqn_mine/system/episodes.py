@@ -1,0 +1,29 @@
+"""Rolling statistics of the finished episodes the runner drains from the actors."""
+
+from __future__ import annotations
+
+from dqn_mine.config import Config
+from dqn_mine.metrics import Rolling
+from dqn_mine.system.control import Episode
+
+
+class EpisodeStats:
+    """Training episodes (count, rolling return and length) and evaluation episodes apart."""
+
+    def __init__(self, cfg: Config, episodes: int = 0):
+        self.episodes = episodes           # training episodes, over every start of the run
+        self.returns = Rolling(cfg.return_window)
+        self.lengths = Rolling(cfg.return_window)
+        self.eval_returns = Rolling(cfg.eval_episodes)
+        self.eval_lengths = Rolling(cfg.eval_episodes)
+
+    def add(self, ep: Episode) -> bool:
+        """Count one finished episode; True for a training episode."""
+        if ep.is_eval:
+            self.eval_returns.extend([ep.ret])
+            self.eval_lengths.extend([ep.length])
+            return False
+        self.episodes += 1
+        self.returns.extend([ep.ret])
+        self.lengths.extend([ep.length])
+        return True
