@@ -406,18 +406,11 @@ class MineEnv(gym.Env):
         self.heading = self._rng.randrange(HEADINGS)
 
     def place_agent_near(self, room: int, item: Entity, near: float, far: float) -> None:
-        """The agent at a random spot of ``room`` between ``near`` and ``far`` units from
-        ``item``'s centre, facing anywhere (``item`` is the only entity that close)."""
-        m, margin = self.layout.rooms[room], AGENT_RADIUS + 0.3
-        rand = self._rng.uniform
-        for _ in range(1000):
-            x = rand(max(m.x0, item.x - far) + margin, min(m.x1, item.x + far) - margin)
-            z = rand(max(m.z0, item.z - far) + margin, min(m.z1, item.z + far) - margin)
-            if near <= math.hypot(x - item.x, z - item.z) <= far:
-                self.agent_x, self.agent_z = x, z
-                self.heading = self._rng.randrange(HEADINGS)
-                return
-        raise RuntimeError(f"no spot in room {room} {near:g}-{far:g} units from the {item.kind}")
+        """The agent at a random free spot of ``room`` between ``near`` and ``far`` units from
+        ``item``'s centre, facing anywhere (doorways may be closer than usual)."""
+        self.agent_x, self.agent_z = self._random_spot(AGENT_RADIUS, room, 0.0,
+                                                       ring=(item, near, far))
+        self.heading = self._rng.randrange(HEADINGS)
 
     def add(self, ent: Entity) -> Entity:
         self.entities.append(ent)
@@ -429,8 +422,10 @@ class MineEnv(gym.Env):
         return tuple(self._rng.randrange(n) for _ in range(count))
 
     def _random_spot(self, radius: float, room: int, door_clearance: float,
-                     exclude: Entity | None = None) -> tuple[float, float]:
-        """A uniformly random spot of ``room`` away from walls, doorways and other entities."""
+                     exclude: Entity | None = None,
+                     ring: tuple[Entity, float, float] | None = None) -> tuple[float, float]:
+        """A uniformly random spot of ``room`` away from walls, doorways and other entities;
+        with ``ring`` = (item, near, far) also between ``near`` and ``far`` from ``item``."""
         m = self.layout.rooms[room]
         margin = radius + 0.3
         doors = [d.center for d in self.layout.doors]
@@ -440,6 +435,9 @@ class MineEnv(gym.Env):
         for _ in range(1000):
             x = rand(m.x0 + margin, m.x1 - margin)
             z = rand(m.z0 + margin, m.z1 - margin)
+            if ring is not None and not ring[1] <= math.hypot(x - ring[0].x, z - ring[0].z) \
+                    <= ring[2]:
+                continue
             if any((x - dx) ** 2 + (z - dz) ** 2 < door_clearance ** 2 for dx, dz in doors):
                 continue
             if any((x - ex) ** 2 + (z - ez) ** 2 < rr for ex, ez, rr in others):
