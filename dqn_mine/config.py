@@ -68,6 +68,9 @@ class Config:
     curriculum_window: int = _f(50, "episodes in the rolling mean that advances the curriculum")
     curriculum_review: float = _f(0.0, "adaptive curriculum: share of episodes that start in an "
                                   "easier phase already passed (0 = the study's rule)")
+    curriculum_steps: Optional[int] = _f(None, "adaptive curriculum: step limit of episodes that "
+                                         "start in a phase easier than the full task (none = "
+                                         "the task's limit)")
     rooms_schedule: tuple[int, ...] = _f((3, 4, 5), "room counts of the schedule curriculum, each "
                                          "for an equal share of the updates")
     # -- actors ------------------------------------------------------------------------------
@@ -250,7 +253,9 @@ PRESETS: dict[str, dict[str, Any]] = {
     #   the full task's reward), with the evaluation actor on the full task every 500k steps;
     #   30% of the episodes review a passed phase, so rewards keep flowing after a switch
     #   (without it the cleared-doorway phase's return fell from 0.5 to 0.01 and the replay's
-    #   rewards to 5e-4);
+    #   rewards to 5e-4); every phase keeps the task's 1,000 steps (--curriculum-steps 500
+    #   left the doorway-cleared phase at a return of 0.0-0.08 for 18,000 updates, where the
+    #   1,000-step run had passed it: a learning agent's search of room 1 needs the time);
     # - a replay ratio of 0.05 updates per transition: the actors throttle to ~1,500 steps/s and
     #   leave the learner its core (free-running, 0.007, the one-room phase stayed below 0.4
     #   for 35 min);
@@ -364,6 +369,10 @@ def _task_problems(c: Config) -> list[str]:
         p.append(f"--room-size must be a positive finite number, got {c.room_size}")
     if c.max_episode_steps is not None and c.max_episode_steps < 1:
         p.append(f"--max-episode-steps must be at least 1, got {c.max_episode_steps}")
+    if c.curriculum_steps is not None and c.curriculum_steps < 1:
+        p.append(f"--curriculum-steps must be at least 1, got {c.curriculum_steps}")
+    if c.curriculum_steps is not None and c.curriculum != "adaptive":
+        p.append("--curriculum-steps applies to --curriculum adaptive only")
     if c.task == "rooms" and not 2 <= c.num_rooms <= MAX_ROOMS:
         p.append(f"--num-rooms must be in 2..{MAX_ROOMS} for the rooms task, got {c.num_rooms}")
     if c.task != "rooms" and c.num_rooms != _field("num_rooms").default:

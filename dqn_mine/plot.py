@@ -3,7 +3,9 @@
 Writes one PNG (default ``<first run>/curves.png``) with the mean episode return of the training
 actors and, where logged, of the evaluation actor, against network updates and against wall time;
 a curriculum run gets its phase (or room count) in a third panel. Needs matplotlib (the ``plot``
-extra). Sweeps over many runs and seeds have their own plots: ``python -m experiments report``.
+extra). ``--milestones 0.5 0.9`` prints instead when each run's full-task rolling return first
+reached each level (updates and minutes), as a markdown table. Sweeps over many runs and seeds
+have their own plots: ``python -m experiments report``.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import math
 import sys
 from pathlib import Path
 
+from dqn_mine.config import Config
 from dqn_mine.exitcodes import EXIT_BAD_INPUT
 from dqn_mine.metrics import read_metrics
 
@@ -34,6 +37,46 @@ def column(rows: list[dict], name: str) -> list[float]:
 
 def has_values(rows: list[dict], name: str) -> bool:
     return any(not math.isnan(v) for v in column(rows, name))
+
+
+def full_task_returns(rows: list[dict], cfg) -> list[tuple[float, float, float]]:
+    """(update, minutes, return) of the rows whose return is the full task's over a full window.
+
+    With the adaptive curriculum that is phase 1's ``phase_return`` (its own episodes only, no
+    reviewed ones) from the row by which about ``curriculum_window`` phase-1 episodes have ended
+    (estimated from the episode count since the switch and the review share, since the table
+    does not count them); without it the actors' ``episode_return`` once ``return_window``
+    episodes have ended."""
+    if cfg.curriculum != "adaptive":
+        return [(r["update"], r["wall_time"] / 60, r["episode_return"]) for r in rows
+                if r["episodes"] >= cfg.return_window]
+    full = [r for r in rows if r["phase"] == 1]
+    if not full:
+        return []
+    start = full[0]["episodes"]
+    share = 1.0 - cfg.curriculum_review
+    return [(r["update"], r["wall_time"] / 60, r["phase_return"]) for r in full
+            if (r["episodes"] - start) * share >= cfg.curriculum_window]
+
+
+def milestones(rows: list[dict], cfg, levels) -> dict:
+    """level -> (updates, minutes) when the full-task rolling return first reached it, or None."""
+    points = full_task_returns(rows, cfg)
+    return {level: next(((u, m) for u, m, ret in points if ret >= level), None)
+            for level in levels}
+
+
+def milestone_table(runs: dict, configs: dict, levels) -> str:
+    """Markdown: one row per run, updates and minutes to each level (- when never reached)."""
+    head = " | ".join(f"return {lv:g}: updates, minutes" for lv in levels)
+    lines = [f"| run | {head} | last full-task return |", "|---" * (len(levels) + 2) + "|"]
+    for label, rows in runs.items():
+        reached = milestones(rows, configs[label], levels)
+        cells = [f"{int(v[0]):,}, {v[1]:.1f}" if v else "-" for v in reached.values()]
+        points = full_task_returns(rows, configs[label])
+        last = f"{points[-1][2]:.2f}" if points else "-"
+        lines.append(f"| {label} | " + " | ".join(cells) + f" | {last} |")
+    return "\n".join(lines)
 
 
 def plot_runs(runs: dict, out: Path) -> Path:
@@ -82,9 +125,16 @@ def main(argv: list[str] | None = None) -> int:
                                  description=__doc__.split("\n\n")[0])
     ap.add_argument("runs", nargs="+", help="run folders (each with metrics.csv)")
     ap.add_argument("--out", default=None, help="PNG to write (default <first run>/curves.png)")
+    ap.add_argument("--milestones", type=float, nargs="+", metavar="RETURN", default=None,
+                    help="print when the full-task rolling return first reached each level "
+                         "instead of plotting")
     args = ap.parse_args(argv)
     try:
         runs = {Path(d).name: load_run(Path(d)) for d in args.runs}
+        if args.milestones:
+            configs = {Path(d).name: Config.from_json(Path(d) / "config.json") for d in args.runs}
+            print(milestone_table(runs, configs, args.milestones))
+            return 0
         import matplotlib  # noqa: F401
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)

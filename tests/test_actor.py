@@ -18,9 +18,11 @@ from dqn_mine.system.weights import WeightBroadcast
 
 
 @contextlib.contextmanager
-def in_process_actor(cfg, net, spec=None):
-    """An actor of ``cfg`` in this process, acting on ``net``'s published weights."""
+def in_process_actor(cfg, net, spec=None, phase=0):
+    """An actor of ``cfg`` in this process, acting on ``net``'s published weights; ``phase``:
+    the curriculum phase in the shared control block when it starts."""
     with SharedBlocks.create(run_block_specs(cfg, net)) as blocks:
+        blocks["ctl_phase"][0] = phase
         weights = WeightBroadcast(blocks)
         weights.publish(net)
         actor = Actor(cfg, spec or actor_specs(cfg)[0],
@@ -112,3 +114,24 @@ def test_unstick_turns_a_stuck_greedy_policy_random_only_while_stuck():
     assert (taken[1:][stuck[:-1]] != 5).mean() > 0.6     # uniform: 5 of 6 are not the no-op
     assert (taken[1:][~stuck[:-1]] == 5).all()
     assert 0.2 < stuck.mean() < 0.9
+
+
+def test_actor_ends_easier_phases_at_the_curriculum_step_limit():
+    """Episodes that start in a phase before the full task are truncated at --curriculum-steps;
+    the environment really stops there, and the episode record says so."""
+    cfg = dataclasses.replace(Config(**PRESETS["cpu"], preset="cpu"), actors=1,
+                              envs_per_actor=2, replay_capacity=4096, eval_every=0,
+                              curriculum_steps=25, curriculum_review=0.0).validate()
+    net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
+    with in_process_actor(cfg, net, phase=6) as actor:
+        assert [env.max_episode_steps for env in actor.envs] == [25, 25]
+        assert [env.phase for env in actor.envs] == [6, 6]
+        for _ in range(25):
+            actor.step()
+        # both environments ended an episode by now (delivered or cut at 25 steps)
+        assert actor.episodes >= 2
+        assert all(env.steps < 25 for env in actor.envs)
+        actor.control.phase_cell[0] = 1           # the curriculum reached the full task
+        for _ in range(25):
+            actor.step()
+        assert [env.max_episode_steps for env in actor.envs] == [1000, 1000]

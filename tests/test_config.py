@@ -114,6 +114,8 @@ BAD = [
     (["--max-grad-norm", "-1"], "--max-grad-norm"),
     (["--room-size", "0"], "--room-size"),
     (["--max-episode-steps", "0"], "--max-episode-steps"),
+    (["--curriculum", "adaptive", "--curriculum-steps", "0"], "--curriculum-steps"),
+    (["--curriculum-steps", "300"], "adaptive only"),
     (["--task", "rooms", "--num-rooms", "1"], "--num-rooms"),
     (["--curriculum", "adaptive", "--task", "one-room"], "three-room"),
     (["--curriculum", "schedule", "--task", "rooms", "--rooms-schedule", "1", "3"],

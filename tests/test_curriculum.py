@@ -92,6 +92,23 @@ def test_episode_start_tells_the_environment_what_to_set():
     assert plain.num_rooms is None
 
 
+def test_curriculum_steps_shorten_only_the_easier_phases_episodes():
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    cfg = parse_args(["--curriculum", "adaptive", "--curriculum-steps", "300"])     # two-room
+    cur = Curriculum(cfg)
+    assert cur.episode_start(4, 0, rng) == (4, {"phase": 4, "max_episode_steps": 300})
+    # the full task keeps the task's own limit (two-room: 1,000), or the one given
+    assert cur.phase_settings(1) == {"phase": 1, "max_episode_steps": 1000}
+    longer = Curriculum(parse_args(["--curriculum", "adaptive", "--curriculum-steps", "300",
+                                    "--max-episode-steps", "1500"]))
+    assert longer.phase_settings(1)["max_episode_steps"] == 1500
+    assert longer.phase_settings(2)["max_episode_steps"] == 300
+    # without it the settings are the study's (phase only)
+    assert Curriculum(parse_args(["--curriculum", "adaptive"])).phase_settings(3) == {"phase": 3}
+
+
 # -- through real runs -------------------------------------------------------------------------
 def test_phases_advance_through_shared_state(tmp_path):
     """A threshold every episode beats moves the phase from 6 to 1; the actors follow it

@@ -44,3 +44,39 @@ def test_plot_of_a_folder_without_metrics_is_one_line(tmp_path, capsys):
     assert main([str(tmp_path / "missing")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("error: no metrics.csv") and "\n" not in err
+
+
+def test_milestones_count_full_task_windows_only(tmp_path, capsys):
+    """Phase 1's rolling return counts once a full window of phase-1 episodes has ended; a high
+    return of an easier phase, or of a half-filled window after the switch, does not."""
+    import json
+
+    from dqn_mine.config import parse_args
+    from dqn_mine.plot import milestones
+
+    cfg = parse_args(["--curriculum", "adaptive", "--curriculum-window", "10",
+                      "--curriculum-review", "0.5"])
+    # (phase, episodes so far, phase_return): phase 2 at 0.95; phase 1 from 100 episodes on,
+    # its window full from 120 (20 episodes x 0.5 share)
+    table = [(2, 50, 0.95), (1, 100, 0.0), (1, 110, 1.0), (1, 120, 0.55), (1, 140, 0.7),
+             (1, 160, 0.92), (1, 180, 0.85)]
+    rows = [{"update": 100.0 * (i + 1), "wall_time": 60.0 * (i + 1), "phase": float(p),
+             "episodes": float(e), "phase_return": r, "episode_return": r}
+            for i, (p, e, r) in enumerate(table)]
+    reached = milestones(rows, cfg, (0.5, 0.9, 0.99))
+    assert reached == {0.5: (400.0, 4.0), 0.9: (600.0, 6.0), 0.99: None}
+    # without a curriculum: the actors' return once return_window episodes have ended
+    plain = parse_args(["--return-window", "100"])
+    assert milestones(rows, plain, (0.9,)) == {0.9: (300.0, 3.0)}
+    # the command line reads each run's config.json
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    metrics = MetricsTable(run_dir / "metrics.csv")
+    for row in rows:
+        metrics.write(row)
+    metrics.close()
+    (run_dir / "config.json").write_text(json.dumps(
+        {"curriculum": "adaptive", "curriculum_window": 10, "curriculum_review": 0.5}))
+    assert main([str(run_dir), "--milestones", "0.5", "0.9"]) == 0
+    out = capsys.readouterr().out
+    assert "| run | 400, 4.0 | 600, 6.0 | 0.85 |" in out

@@ -267,8 +267,11 @@ def test_smoke_preset_learns_one_room(tmp_path):
                     timeout=1500)
     assert res.returncode == 0, res.stderr[-3000:]
     rows = metrics_rows(run_dir)
-    final = float(rows[-1]["episode_return"])
-    assert final >= 0.8, f"smoke preset ended at mean return {final:.2f}"
+    # The mean of the last five rows (the last 1,250 updates), not the last row alone: one row's
+    # rolling return swings by +-0.1 from one log interval to the next (0.73 once after rows of
+    # 0.82-0.93), so a single row tests the log's timing as much as what was learned.
+    final = sum(float(r["episode_return"]) for r in rows[-5:]) / 5
+    assert final >= 0.8, f"smoke preset ended at mean return {final:.2f} (last five rows)"
 
 
 def test_cpu_preset_finds_rewards_on_two_room_within_its_prefill(tmp_path):

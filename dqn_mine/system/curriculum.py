@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from dqn_mine.config import Config
-from dqn_mine.env.tasks import TASK_PHASES
+from dqn_mine.env.tasks import TASK_PHASES, TASKS
 from dqn_mine.metrics import Rolling
 
 
@@ -39,6 +39,9 @@ class Curriculum:
         # schedule: the current room count; None without the schedule
         self.num_rooms: int | None = None
         self.window = cfg.curriculum_window
+        # adaptive: the step limits of an easier phase's episodes and of the full task's
+        self.phase_steps = cfg.curriculum_steps
+        self.full_steps = cfg.max_episode_steps or TASKS[cfg.task].step_limit
         self.returns = Rolling(self.window)             # current phase's episodes only
         self._follow_schedule(updates)
 
@@ -81,10 +84,21 @@ class Curriculum:
         while the shared state says ``phase`` and ``num_rooms``."""
         if self.kind == "adaptive":
             phase = self.review_phase(phase, rng)
-            return phase, {"phase": phase}
+            return phase, self.phase_settings(phase)
         if self.kind == "schedule":
             return phase, {"num_rooms": num_rooms}
         return phase, {}
+
+    def phase_settings(self, phase: int) -> dict:
+        """The environment settings of an episode that starts in ``phase``. With
+        ``curriculum_steps`` an easier phase's episode ends sooner (or later) than the full
+        task's, which keeps the task's own limit. A shorter limit trades the steps a failed start
+        wanders for more starts; it also cuts off a learning agent's slow successes (on two-room
+        500 steps stalled the doorway-cleared phase; docs/exploration.md)."""
+        if self.phase_steps is None:
+            return {"phase": phase}
+        steps = self.full_steps if phase == 1 else self.phase_steps
+        return {"phase": phase, "max_episode_steps": steps}
 
     def review_phase(self, phase: int, rng: np.random.Generator) -> int:
         """The phase an episode starts in: with probability ``review`` an easier one already
