@@ -253,9 +253,9 @@ PRESETS: dict[str, dict[str, Any]] = {
     #   the full task's reward), with the evaluation actor on the full task every 500k steps;
     #   30% of the episodes review a passed phase, so rewards keep flowing after a switch
     #   (without it the cleared-doorway phase's return fell from 0.5 to 0.01 and the replay's
-    #   rewards to 5e-4); every phase keeps the task's 1,000 steps (--curriculum-steps 500
-    #   left the doorway-cleared phase at a return of 0.0-0.08 for 18,000 updates, where the
-    #   1,000-step run had passed it: a learning agent's search of room 1 needs the time);
+    #   rewards to 5e-4); every phase keeps the task's 1,000 steps (with --curriculum-steps
+    #   500 the doorway-cleared phase sat at a return of 0.0-0.08 for 19,000 updates in one
+    #   run: no sign that it helps, and a learning agent's search of room 1 needs the time);
     # - a replay ratio of 0.05 updates per transition: the actors throttle to ~1,500 steps/s and
     #   leave the learner its core (free-running, 0.007, the one-room phase stayed below 0.4
     #   for 35 min);

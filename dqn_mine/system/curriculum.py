@@ -94,7 +94,7 @@ class Curriculum:
         ``curriculum_steps`` an easier phase's episode ends sooner (or later) than the full
         task's, which keeps the task's own limit. A shorter limit trades the steps a failed start
         wanders for more starts; it also cuts off a learning agent's slow successes (on two-room
-        500 steps stalled the doorway-cleared phase; docs/exploration.md)."""
+        500 steps did not help one run; docs/exploration.md)."""
         if self.phase_steps is None:
             return {"phase": phase}
         steps = self.full_steps if phase == 1 else self.phase_steps
