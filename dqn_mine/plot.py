@@ -61,7 +61,10 @@ def full_task_returns(rows: list[dict], cfg) -> list[tuple[float, float, float]]
 
 def milestones(rows: list[dict], cfg, levels) -> dict:
     """level -> (updates, minutes) when the full-task rolling return first reached it, or None."""
-    points = full_task_returns(rows, cfg)
+    return first_reached(full_task_returns(rows, cfg), levels)
+
+
+def first_reached(points: list[tuple[float, float, float]], levels) -> dict:
     return {level: next(((u, m) for u, m, ret in points if ret >= level), None)
             for level in levels}
 
@@ -71,9 +74,9 @@ def milestone_table(runs: dict, configs: dict, levels) -> str:
     head = " | ".join(f"return {lv:g}: updates, minutes" for lv in levels)
     lines = [f"| run | {head} | last full-task return |", "|---" * (len(levels) + 2) + "|"]
     for label, rows in runs.items():
-        reached = milestones(rows, configs[label], levels)
-        cells = [f"{int(v[0]):,}, {v[1]:.1f}" if v else "-" for v in reached.values()]
         points = full_task_returns(rows, configs[label])
+        reached = first_reached(points, levels)
+        cells = [f"{int(v[0]):,}, {v[1]:.1f}" if v else "-" for v in reached.values()]
         last = f"{points[-1][2]:.2f}" if points else "-"
         lines.append(f"| {label} | " + " | ".join(cells) + f" | {last} |")
     return "\n".join(lines)

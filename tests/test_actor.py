@@ -131,6 +131,10 @@ def test_actor_ends_easier_phases_at_the_curriculum_step_limit():
         # both environments ended an episode by now (delivered or cut at 25 steps)
         assert actor.episodes >= 2
         assert all(env.steps < 25 for env in actor.envs)
+        records = actor.control.drain_episodes()
+        assert len(records) == actor.episodes
+        assert all(e.phase == 6 and e.length <= 25 and not e.is_eval for e in records)
+        assert any(e.length == 25 for e in records) or all(e.ret == 1.0 for e in records)
         actor.control.phase_cell[0] = 1           # the curriculum reached the full task
         for _ in range(25):
             actor.step()
