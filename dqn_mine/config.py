@@ -256,15 +256,17 @@ PRESETS: dict[str, dict[str, Any]] = {
     #   rewards to 5e-4); every phase keeps the task's 1,000 steps (with --curriculum-steps
     #   500 the doorway-cleared phase sat at a return of 0.0-0.08 for 19,000 updates in one
     #   run: no sign that it helps, and a learning agent's search of room 1 needs the time);
-    # - a replay ratio of 0.05 updates per transition: the actors throttle to ~1,500 steps/s and
-    #   leave the learner its core (free-running, 0.007, the one-room phase stayed below 0.4
-    #   for 35 min);
+    # - a replay ratio of 0.03 updates per transition: the learner (one core, 60-80 updates/s)
+    #   is the bottleneck at any ratio from 0.03 to 0.1, so the ratio only sets the data per
+    #   update; at 0.03 (~2,000 steps/s) the actors fill the second core, at 0.05 it was 40%
+    #   idle. Seeds 0 and 1 reached the full task at 31.7 and 33.5 min (0.05: 37.1 min and
+    #   never; 0.1 was worse still). Free-running (0.007) starves the learner of its core;
     # - unstick: a random action after a step that left the frame unchanged (a greedy policy
     #   facing a wall otherwise repeats itself); it doubles the episodes that reach room 2.
     "cpu": {
         "task": "two-room", "actors": 2, "envs_per_actor": 16, "unstick": True,
         "epsilon_schedule": "apex", "exploration": "ez", "curriculum": "adaptive",
-        "curriculum_review": 0.3, "replay_ratio": 0.05,
+        "curriculum_review": 0.3, "replay_ratio": 0.03,
         "prefill": 20_000, "replay_capacity": 262_144, "updates": 300_000,
         "lr": 1e-4, "target_update_interval": 1000, "publish_interval": 250,
         "eval_every": 500_000, "checkpoint_interval": 10_000, "log_interval": 500,

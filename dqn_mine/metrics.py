@@ -15,7 +15,12 @@ COLUMNS = (
     "eval_return", "eval_length", "updates_per_s", "env_steps_per_s", "replay_ratio",
     "sampled_reward", "loss", "td_abs", "mean_q", "phase", "beta", "replay_size",
     "phase_return",   # adaptive curriculum: the rolling mean that advances it (current phase only)
+    # The same two means over the episodes played at an exploration rate of at most LOW_EPSILON:
+    # under the Ape-X rates they show what the near-greedy policy does, apart from the envs
+    # that mostly explore.
+    "low_eps_return", "phase_low_eps_return",
 )
+LOW_EPSILON = 0.01   # the study's rate: an env at or below it plays (almost) its greedy policy
 
 
 class MetricsTable:
@@ -36,14 +41,16 @@ class MetricsTable:
                 self._tb.add_text("config", config_text, 0)
         self.path = Path(path)
         fresh = not self.path.exists() or self.path.stat().st_size == 0
+        # A resumed run keeps its file's own header (an older version may have fewer columns).
+        columns = COLUMNS if fresh else _header(self.path)
         self._file = open(self.path, "a", newline="")
-        self._writer = csv.DictWriter(self._file, fieldnames=COLUMNS, extrasaction="ignore")
+        self._writer = csv.DictWriter(self._file, fieldnames=columns, extrasaction="ignore")
         if fresh:
             self._writer.writeheader()
             self._file.flush()
 
     def write(self, row: dict[str, float]) -> None:
-        self._writer.writerow({k: _fmt(row.get(k)) for k in COLUMNS})
+        self._writer.writerow({k: _fmt(row.get(k)) for k in self._writer.fieldnames})
         self._file.flush()
         if self._tb is not None:
             step = int(row.get("update", 0))
@@ -65,6 +72,11 @@ def _fmt(value) -> str:
     if isinstance(value, float):
         return f"{value:.6g}"
     return str(value)
+
+
+def _header(path: Path) -> list[str]:
+    with open(path, newline="") as f:
+        return next(csv.reader(f), list(COLUMNS))
 
 
 def read_metrics(path: Path) -> list:

@@ -1,10 +1,12 @@
 """Learning curves of one or more runs: `python -m dqn_mine.plot RUN_DIR [RUN_DIR ...]`.
 
 Writes one PNG (default ``<first run>/curves.png``) with the mean episode return of the training
-actors and, where logged, of the evaluation actor, against network updates and against wall time;
+actors (and, dotted, of those of their envs that play at epsilon <= 0.01) and, where logged, of
+the evaluation actor, against network updates and against wall time;
 a curriculum run gets its phase (or room count) in a third panel. Needs matplotlib (the ``plot``
 extra). ``--milestones 0.5 0.9`` prints instead when each run's full-task rolling return first
-reached each level (updates and minutes), as a markdown table. Sweeps over many runs and seeds
+reached each level (updates and minutes), as a markdown table; ``--phases`` when each run
+entered each curriculum phase. Sweeps over many runs and seeds
 have their own plots: ``python -m experiments report``.
 """
 
@@ -39,23 +41,26 @@ def has_values(rows: list[dict], name: str) -> bool:
     return any(not math.isnan(v) for v in column(rows, name))
 
 
-def full_task_returns(rows: list[dict], cfg) -> list[tuple[float, float, float]]:
+def full_task_returns(rows: list[dict], cfg, low_eps: bool = False) -> list[tuple]:
     """(update, minutes, return) of the rows whose return is the full task's over a full window.
 
     With the adaptive curriculum that is phase 1's ``phase_return`` (its own episodes only, no
     reviewed ones) from the row by which about ``curriculum_window`` phase-1 episodes have ended
     (estimated from the episode count since the switch and the review share, since the table
     does not count them); without it the actors' ``episode_return`` once ``return_window``
-    episodes have ended."""
+    episodes have ended. ``low_eps``: the same rows' means over the episodes played at epsilon
+    <= 0.01 (``phase_low_eps_return``, ``low_eps_return``)."""
     if cfg.curriculum != "adaptive":
-        return [(r["update"], r["wall_time"] / 60, r["episode_return"]) for r in rows
+        key = "low_eps_return" if low_eps else "episode_return"
+        return [(r["update"], r["wall_time"] / 60, r.get(key, math.nan)) for r in rows
                 if r["episodes"] >= cfg.return_window]
+    key = "phase_low_eps_return" if low_eps else "phase_return"
     full = [r for r in rows if r["phase"] == 1]
     if not full:
         return []
     start = full[0]["episodes"]
     share = 1.0 - cfg.curriculum_review
-    return [(r["update"], r["wall_time"] / 60, r["phase_return"]) for r in full
+    return [(r["update"], r["wall_time"] / 60, r.get(key, math.nan)) for r in full
             if (r["episodes"] - start) * share >= cfg.curriculum_window]
 
 
@@ -70,16 +75,49 @@ def first_reached(points: list[tuple[float, float, float]], levels) -> dict:
 
 
 def milestone_table(runs: dict, configs: dict, levels) -> str:
-    """Markdown: one row per run, updates and minutes to each level (- when never reached)."""
+    """Markdown: one row per run, updates and minutes to each level (- when never reached), the
+    last full-task return, and (where logged) that of the envs at epsilon <= 0.01."""
+    low_eps = any(has_values(rows, "low_eps_return") for rows in runs.values())
     head = " | ".join(f"return {lv:g}: updates, minutes" for lv in levels)
-    lines = [f"| run | {head} | last full-task return |", "|---" * (len(levels) + 2) + "|"]
+    extra = " | last at epsilon <= 0.01" if low_eps else ""
+    lines = [f"| run | {head} | last full-task return{extra} |",
+             "|---" * (len(levels) + 2 + low_eps) + "|"]
     for label, rows in runs.items():
         points = full_task_returns(rows, configs[label])
         reached = first_reached(points, levels)
         cells = [f"{int(v[0]):,}, {v[1]:.1f}" if v else "-" for v in reached.values()]
-        last = f"{points[-1][2]:.2f}" if points else "-"
-        lines.append(f"| {label} | " + " | ".join(cells) + f" | {last} |")
+        cells.append(_last(points))
+        if low_eps:
+            cells.append(_last(full_task_returns(rows, configs[label], low_eps=True)))
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def phase_starts(rows: list[dict]) -> dict:
+    """phase -> (update, minutes) of the first row logged in it (its start, to a log row)."""
+    starts: dict = {}
+    for r in rows:
+        phase = r.get("phase", math.nan)
+        if not math.isnan(phase) and int(phase) not in starts:
+            starts[int(phase)] = (r["update"], r["wall_time"] / 60)
+    return starts
+
+
+def phase_table(runs: dict) -> str:
+    """Markdown: one row per run, the updates and minutes at which it entered each phase."""
+    starts = {label: phase_starts(rows) for label, rows in runs.items()}
+    phases = sorted({p for s in starts.values() for p in s}, reverse=True)
+    lines = ["| run | " + " | ".join(f"phase {p}: updates, minutes" for p in phases) + " |",
+             "|---" * (len(phases) + 1) + "|"]
+    for label, s in starts.items():
+        cells = [f"{int(s[p][0]):,}, {s[p][1]:.1f}" if p in s else "-" for p in phases]
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _last(points: list[tuple]) -> str:
+    """The last point's return, 2 decimals ("-" with none or NaN)."""
+    return f"{points[-1][2]:.2f}" if points and not math.isnan(points[-1][2]) else "-"
 
 
 def plot_runs(runs: dict, out: Path) -> Path:
@@ -99,6 +137,9 @@ def plot_runs(runs: dict, out: Path) -> Path:
         for ax, x, scale in ((axes[0], "update", 1.0), (axes[1], "wall_time", 60.0)):
             xs = [v / scale for v in column(rows, x)]
             ax.plot(xs, column(rows, "episode_return"), color=color, lw=2, label=label)
+            if has_values(rows, "low_eps_return"):   # runs from before it was logged lack it
+                ax.plot(xs, column(rows, "low_eps_return"), color=color, lw=1.2, ls=":",
+                        label=f"{label} (envs at epsilon <= 0.01)")
             if has_values(rows, "eval_return"):
                 ax.plot(xs, column(rows, "eval_return"), color=color, lw=1.5, ls="--",
                         label=f"{label} (evaluation, full task)")
@@ -131,12 +172,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--milestones", type=float, nargs="+", metavar="RETURN", default=None,
                     help="print when the full-task rolling return first reached each level "
                          "instead of plotting")
+    ap.add_argument("--phases", action="store_true",
+                    help="print when each run entered each curriculum phase instead of plotting")
     args = ap.parse_args(argv)
     try:
         runs = {Path(d).name: load_run(Path(d)) for d in args.runs}
         if args.milestones:
             configs = {Path(d).name: Config.from_json(Path(d) / "config.json") for d in args.runs}
             print(milestone_table(runs, configs, args.milestones))
+            return 0
+        if args.phases:
+            print(phase_table(runs))
             return 0
         import matplotlib  # noqa: F401
     except ValueError as exc:

@@ -100,7 +100,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ConfigError, CheckpointError, SharedMemoryError) as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    summary = Run(cfg, run_dir, state, serial=cfg.serial, progress=cfg.progress).execute()
+    try:
+        summary = Run(cfg, run_dir, state, serial=cfg.serial, progress=cfg.progress).execute()
+    except KeyboardInterrupt:  # a second Ctrl-C during the shutdown itself
+        print(f"\n{PROG}: stopped at once by a second SIGINT during the shutdown; resume from "
+              f"the last checkpoint with: python -m {PROG} --resume {run_dir}", file=sys.stderr)
+        return EXIT_INTERRUPTED
     (run_dir / "summary.json").write_text(json.dumps(dataclasses.asdict(summary), indent=2))
     report(summary)
     return summary.exit_code

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 
 from dqn_mine.agent.acting import ActingCore
@@ -96,3 +97,8 @@ def test_episode_stats_keep_training_and_evaluation_apart():
     assert not stats.add(Episode(1, 0.0, 50, 0, True))
     assert stats.episodes == 11 and stats.returns.mean == 1.0 and stats.lengths.mean == 30
     assert stats.eval_returns.mean == 0.0 and stats.eval_lengths.mean == 50
+    assert len(stats.low_eps_returns) == 0       # an episode of unknown rate is not low
+    stats.add(Episode(0, 0.0, 1000, 5, False, epsilon=0.4))
+    stats.add(Episode(0, 0.0, 1000, 5, False, epsilon=0.01))
+    stats.add(Episode(0, 1.0, 900, 5, False, epsilon=0.001))
+    assert stats.returns.mean == pytest.approx(0.5) and stats.low_eps_returns.mean == 0.5

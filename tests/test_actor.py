@@ -6,6 +6,7 @@ import dataclasses
 import numpy as np
 import torch
 
+from dqn_mine.agent.learning import epsilon_for_actor
 from dqn_mine.agent.network import DuelingQNetwork
 from dqn_mine.config import PRESETS, Config
 from dqn_mine.replay import ReplayStorage
@@ -59,8 +60,6 @@ def test_bfloat16_actor_acts_on_the_published_weights():
 
 
 def test_ez_actor_holds_random_motions_with_one_rate_per_env():
-    from dqn_mine.agent.learning import epsilon_for_actor
-
     cfg = dataclasses.replace(Config(**PRESETS["smoke"], preset="smoke"), actors=2,
                               envs_per_actor=3, replay_capacity=4096, eval_every=0,
                               exploration="ez").validate()
@@ -134,6 +133,9 @@ def test_actor_ends_easier_phases_at_the_curriculum_step_limit():
         records = actor.control.drain_episodes()
         assert len(records) == actor.episodes
         assert all(e.phase == 6 and e.length <= 25 and not e.is_eval for e in records)
+        # each record carries the Ape-X rate of the env that played it
+        assert set(actor.epsilons) == {epsilon_for_actor(0, 2), epsilon_for_actor(1, 2)}
+        assert {e.epsilon for e in records} <= set(actor.epsilons)
         assert any(e.length == 25 for e in records) or all(e.ret == 1.0 for e in records)
         actor.control.phase_cell[0] = 1           # the curriculum reached the full task
         for _ in range(25):

@@ -52,6 +52,21 @@ def test_adaptive_curriculum_starts_easiest_and_advances_one_phase_per_full_wind
     assert cur.phase == 5 and cur.phase_return == 0.5
 
 
+def test_low_epsilon_return_counts_only_the_near_greedy_episodes_of_the_phase():
+    cfg = parse_args(["--curriculum", "adaptive", "--curriculum-window", "4",
+                      "--curriculum-threshold", "0.4"])             # two-room: starts at 6
+    cur = Curriculum(cfg)
+    assert math.isnan(cur.phase_low_eps_return)
+    cur.record(6, 1.0, epsilon=0.4)      # an exploring env's success
+    cur.record(6, 0.0, epsilon=0.01)     # at the study's rate: counted
+    cur.record(5, 1.0, epsilon=0.001)    # a reviewed phase: neither mean
+    cur.record(6, 1.0, epsilon=0.002)
+    assert cur.phase_return == pytest.approx(2 / 3) and cur.phase_low_eps_return == 0.5
+    cur.record(6, 0.0, epsilon=0.2)
+    cur.advance(updates=0)               # mean 0.5 > 0.4 over all four: the rule ignores epsilon
+    assert cur.phase == 5 and math.isnan(cur.phase_low_eps_return)
+
+
 def test_adaptive_curriculum_stops_at_the_full_task_and_resumes_where_it_was():
     cfg = parse_args(["--curriculum", "adaptive", "--curriculum-window", "1",
                       "--curriculum-threshold", "-1"])              # two-room: phases 6..1

@@ -80,3 +80,18 @@ def test_milestones_count_full_task_windows_only(tmp_path, capsys):
     assert main([str(run_dir), "--milestones", "0.5", "0.9"]) == 0
     out = capsys.readouterr().out
     assert "| run | 400, 4.0 | 600, 6.0 | 0.85 |" in out
+    # a run that logs the near-greedy envs' means gets their last full-task value as well
+    with_low = tmp_path / "low"
+    with_low.mkdir()
+    metrics = MetricsTable(with_low / "metrics.csv")
+    for row in rows:
+        metrics.write({**row, "low_eps_return": 0.5,
+                       "phase_low_eps_return": 0.4 * row["phase_return"]})
+    metrics.close()
+    (with_low / "config.json").write_text((run_dir / "config.json").read_text())
+    assert main([str(run_dir), str(with_low), "--milestones", "0.5"]) == 0
+    out = capsys.readouterr().out
+    assert "| last full-task return | last at epsilon <= 0.01 |" in out
+    assert main([str(run_dir), "--phases"]) == 0
+    assert "| run | 100, 1.0 | 200, 2.0 |" in capsys.readouterr().out   # phase 2, then 1
+    assert "| run | 400, 4.0 | 0.85 | - |" in out and "| low | 400, 4.0 | 0.85 | 0.34 |" in out

@@ -215,6 +215,34 @@ def test_sigint_stops_cleanly_and_resume_continues(tmp_path, save_replay):
         assert int(resumed[0]["replay_size"]) >= 0.95 * stopped_size
 
 
+def test_second_sigint_stops_at_once_in_one_line_and_leaves_a_resumable_run(tmp_path):
+    """The user insists (Ctrl-C twice): no traceback, no replay save to wait for, no process or
+    segment left (the fixture checks /dev/shm), and the checkpoint still loads."""
+    run_dir = tmp_path / "twice"
+    proc = subprocess.Popen(train_cmd(*TINY, "--updates", "100000", "--run-dir", str(run_dir),
+                                      "--save-replay", str(tmp_path / "replay")),
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for(lambda: (run_dir / "metrics.csv").exists() and len(metrics_rows(run_dir)) >= 2,
+                 240, "training to log")
+        kids = children_of(proc.pid)
+        proc.send_signal(signal.SIGINT)
+        time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err[-3000:]
+    assert "Traceback" not in err and "second SIGINT" in out + err
+    assert "--resume" in out + err
+    wait_for(lambda: not alive(kids), 10, "every child process to exit")
+    from dqn_mine import checkpoint as ckpt
+
+    assert int(ckpt.load(run_dir)["counters"]["updates"]) > 0
+    assert not (tmp_path / "replay").exists() or not any((tmp_path / "replay").iterdir())
+
+
 def test_killed_actor_stops_the_run_with_an_error(tmp_path):
     run_dir = tmp_path / "kill"
     proc = subprocess.Popen(train_cmd(*TINY, "--updates", "100000", "--run-dir", str(run_dir)),

@@ -54,6 +54,7 @@ class ActorBase:
         self.returns = np.zeros(spec.num_envs)
         self.lengths = np.zeros(spec.num_envs, dtype=np.int64)
         self.phases = np.zeros(spec.num_envs, dtype=np.int64)   # each episode's start phase
+        self.epsilons = np.broadcast_to(np.asarray(spec.epsilon, dtype=float), spec.num_envs)
         self.steps = 0
         self.episodes = 0
 
@@ -100,7 +101,8 @@ class ActorBase:
     def _end_episode(self, j: int) -> None:
         self.control.record_episode(self.spec.index, float(self.returns[j]),
                                     int(self.lengths[j]), int(self.phases[j]),
-                                    is_eval=self.spec.evaluates)
+                                    is_eval=self.spec.evaluates,
+                                    epsilon=float(self.epsilons[j]))
         self.episodes += 1
         self.between_episodes(j)
         self.apply_curriculum(j)

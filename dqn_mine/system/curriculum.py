@@ -20,7 +20,7 @@ import numpy as np
 
 from dqn_mine.config import Config
 from dqn_mine.env.tasks import TASK_PHASES, TASKS
-from dqn_mine.metrics import Rolling
+from dqn_mine.metrics import LOW_EPSILON, Rolling
 
 
 class Curriculum:
@@ -43,13 +43,18 @@ class Curriculum:
         self.phase_steps = cfg.curriculum_steps
         self.full_steps = cfg.max_episode_steps or TASKS[cfg.task].step_limit
         self.returns = Rolling(self.window)             # current phase's episodes only
+        self.low_eps_returns = Rolling(self.window)     # those of them at epsilon <= LOW_EPSILON
         self._follow_schedule(updates)
 
     # -- the runner's side ---------------------------------------------------------------------
-    def record(self, phase: int, ret: float) -> None:
-        """A training episode that started in ``phase`` ended with return ``ret``."""
+    def record(self, phase: int, ret: float, epsilon: float = float("nan")) -> None:
+        """A training episode that started in ``phase``, played at exploration rate ``epsilon``,
+        ended with return ``ret``. Every one of the phase counts towards the switch (the
+        study's rule); the low-epsilon mean is only shown (an unknown rate, NaN, is not low)."""
         if phase == self.phase:
             self.returns.extend([ret])
+            if epsilon <= LOW_EPSILON:
+                self.low_eps_returns.extend([ret])
 
     def advance(self, updates: int) -> None:
         """After a batch of recorded episodes: one phase harder when the rolling mean of the
@@ -59,6 +64,7 @@ class Curriculum:
                 and self.returns.mean > self.threshold:
             self.phase -= 1
             self.returns.clear()
+            self.low_eps_returns.clear()
         self._follow_schedule(updates)
 
     def _follow_schedule(self, updates: int) -> None:
@@ -72,6 +78,11 @@ class Curriculum:
     def phase_return(self) -> float:
         """Rolling mean return of the current phase (NaN without the adaptive curriculum)."""
         return self.returns.mean if self.kind == "adaptive" else float("nan")
+
+    @property
+    def phase_low_eps_return(self) -> float:
+        """The same over the current phase's episodes at epsilon <= LOW_EPSILON (NaN if none)."""
+        return self.low_eps_returns.mean if self.kind == "adaptive" else float("nan")
 
     @property
     def logged_phase(self) -> int:

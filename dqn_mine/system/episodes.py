@@ -3,17 +3,19 @@
 from __future__ import annotations
 
 from dqn_mine.config import Config
-from dqn_mine.metrics import Rolling
+from dqn_mine.metrics import LOW_EPSILON, Rolling
 from dqn_mine.system.control import Episode
 
 
 class EpisodeStats:
-    """Training episodes (count, rolling return and length) and evaluation episodes apart."""
+    """Training episodes (count, rolling return and length; the rolling return of those played
+    at epsilon <= LOW_EPSILON) and evaluation episodes apart."""
 
     def __init__(self, cfg: Config, episodes: int = 0):
         self.episodes = episodes           # training episodes, over every start of the run
         self.returns = Rolling(cfg.return_window)
         self.lengths = Rolling(cfg.return_window)
+        self.low_eps_returns = Rolling(cfg.return_window)
         self.eval_returns = Rolling(cfg.eval_episodes)
         self.eval_lengths = Rolling(cfg.eval_episodes)
 
@@ -26,4 +28,6 @@ class EpisodeStats:
         self.episodes += 1
         self.returns.extend([ep.ret])
         self.lengths.extend([ep.length])
+        if ep.epsilon <= LOW_EPSILON:
+            self.low_eps_returns.extend([ep.ret])
         return True

@@ -8,6 +8,7 @@ actor, writes a resumable checkpoint and unlinks every shared segment.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import signal
@@ -60,6 +61,8 @@ class StopSignals:
 
     def __init__(self):
         self.received: str | None = None
+        self.insisted = False      # a second Ctrl-C came
+        self.deferring = False     # then only note it (see deferred)
         self._old = {}
 
     def __enter__(self) -> StopSignals:
@@ -69,8 +72,22 @@ class StopSignals:
 
     def _handle(self, signum, frame) -> None:
         if self.received is not None and signum == signal.SIGINT:
-            raise KeyboardInterrupt  # a second Ctrl-C: the user insists
+            self.insisted = True
+            if not self.deferring:
+                raise KeyboardInterrupt  # a second Ctrl-C: the user insists
+            return
         self.received = signal.Signals(signum).name
+
+    @contextlib.contextmanager
+    def deferred(self):
+        """Installed, but a second Ctrl-C is only noted: stopping the processes and writing the
+        checkpoint take seconds, and cutting them short would leave no resumable run."""
+        with self:
+            self.deferring = True
+            try:
+                yield self
+            finally:
+                self.deferring = False
 
     def __exit__(self, *exc) -> None:
         for sig, handler in self._old.items():
@@ -134,7 +151,7 @@ class Run:
         """Take in the finished episodes; the curriculum follows, the actors read it back."""
         for ep in self.ctx.control.drain_episodes():
             if self.stats.add(ep):
-                self.curriculum.record(ep.phase, ep.ret)
+                self.curriculum.record(ep.phase, ep.ret, ep.epsilon)
         self.curriculum.advance(self.updates())
         self.ctx.control.show_curriculum(self.curriculum)
 
@@ -160,13 +177,17 @@ class Run:
         except SnapshotError as exc:  # a damaged saved replay: keep it and the checkpoint
             code, self.reason = EXIT_FAILED, str(exc)
             self.keep_checkpoint = True
+        except KeyboardInterrupt:  # a second Ctrl-C: the checkpoint is still saved, not the replay
+            code = EXIT_INTERRUPTED
         except Exception as exc:  # the learner failed: keep the last good checkpoint
             traceback.print_exc()
             code, self.reason = EXIT_FAILED, f"learner failed: {type(exc).__name__}: {exc}"
             self.keep_checkpoint = True
         finally:
-            self.shutdown()
-            self.ctx.close()
+            try:
+                self.shutdown()
+            finally:  # even when a Ctrl-C cuts the replay's saving short: no segment outlives it
+                self.ctx.close()
         return self.summary(code)
 
     def replay_to_restore(self) -> str | None:
@@ -254,7 +275,9 @@ class Run:
                "env_steps_per_s": step_rate.rate(self.actor_steps()),
                "replay_ratio": self.replay_ratio(), "phase": self.curriculum.logged_phase,
                "beta": learner.beta(), "replay_size": learner.replay_size(),
-               "phase_return": self.curriculum.phase_return}
+               "phase_return": self.curriculum.phase_return,
+               "low_eps_return": stats.low_eps_returns.mean,
+               "phase_low_eps_return": self.curriculum.phase_low_eps_return}
         row.update({k: (sum(v) / len(v) if v else math.nan) for k, v in agg.items()})
         self.metrics.write(row)
         return row
@@ -269,15 +292,21 @@ class Run:
         ckpt.save(self.run_dir, self.ctx.learner.state_dict(), self.counters(), self.saved_cfg)
 
     def shutdown(self) -> None:
-        """Stop the actors and the learner; keep what the run learned (checkpoint, replay)."""
-        self.ctx.stop()
-        if self.ctx.learner is None:
-            return
-        self.drain_episodes()
-        if not self.keep_checkpoint:
-            self.save_checkpoint()
-            if self.cfg.save_replay:
-                self.ctx.learner.save_replay(self.cfg.save_replay)
+        """Stop the actors and the learner; keep what the run learned (checkpoint, replay). A
+        second Ctrl-C skips the replay, or cuts its saving short (it is written to a temporary
+        folder first, so an older snapshot stays whole)."""
+        with self.signals.deferred():
+            self.ctx.stop()
+            if self.ctx.learner is not None:
+                self.drain_episodes()
+            keep = self.ctx.learner is not None and not self.keep_checkpoint
+            if keep:
+                self.save_checkpoint()
+        if self.signals.insisted:
+            self.reason = "stopped at once by a second SIGINT" + (
+                " (the replay was not saved)" if self.cfg.save_replay else "")
+        elif keep and self.cfg.save_replay:
+            self.ctx.learner.save_replay(self.cfg.save_replay)
 
     def summary(self, code: int) -> Summary:
         learner = self.ctx.learner
