@@ -134,8 +134,9 @@ def test_actor_ends_easier_phases_at_the_curriculum_step_limit():
         assert len(records) == actor.episodes
         assert all(e.phase == 6 and e.length <= 25 and not e.is_eval for e in records)
         # each record carries the Ape-X rate of the env that played it
-        assert set(actor.epsilons) == {epsilon_for_actor(0, 2), epsilon_for_actor(1, 2)}
-        assert {e.epsilon for e in records} <= set(actor.epsilons)
+        rates = set(actor.core.explorer.epsilon)
+        assert rates == {epsilon_for_actor(0, 2), epsilon_for_actor(1, 2)}
+        assert {e.epsilon for e in records} <= rates
         assert any(e.length == 25 for e in records) or all(e.ret == 1.0 for e in records)
         actor.control.phase_cell[0] = 1           # the curriculum reached the full task
         for _ in range(25):

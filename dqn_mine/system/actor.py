@@ -54,7 +54,6 @@ class ActorBase:
         self.returns = np.zeros(spec.num_envs)
         self.lengths = np.zeros(spec.num_envs, dtype=np.int64)
         self.phases = np.zeros(spec.num_envs, dtype=np.int64)   # each episode's start phase
-        self.epsilons = np.broadcast_to(np.asarray(spec.epsilon, dtype=float), spec.num_envs)
         self.steps = 0
         self.episodes = 0
 
@@ -102,7 +101,7 @@ class ActorBase:
         self.control.record_episode(self.spec.index, float(self.returns[j]),
                                     int(self.lengths[j]), int(self.phases[j]),
                                     is_eval=self.spec.evaluates,
-                                    epsilon=float(self.epsilons[j]))
+                                    epsilon=float(self.core.explorer.epsilon[j]))
         self.episodes += 1
         self.between_episodes(j)
         self.apply_curriculum(j)
