@@ -133,6 +133,8 @@ class Config:
     eval_task: Optional[str] = _f(None, "task of the evaluation actor (none = --task, full "
                                   "problem)")
     eval_epsilon: float = _f(0.01, "exploration rate of the evaluation actor")
+    eval_unstick: bool = _f(False, "the evaluation actor also takes a random action after a "
+                            "step that left the frame unchanged (as --unstick)")
     eval_video_every: int = _f(10, "save a GIF of one evaluation episode every N evaluations "
                                "(0 = never)")
     # -- run ---------------------------------------------------------------------------------
@@ -248,7 +250,9 @@ PRESETS: dict[str, dict[str, Any]] = {
     #   benchmark (it still finds no reward there; see docs/exploration.md);
     # - pre-fill 20,000 steps per actor and a 262,144-slot replay: the hour holds ~100k updates,
     #   not the study's 1e6, so the replay turns over in about the same number of updates;
-    # - lr 1e-4, target sync every 1,000 updates, weights every 250: fewer updates to learn in;
+    # - lr 1e-4, target sync every 1,000 updates, weights every 250: fewer updates to learn in
+    #   (target sync 250 was tried on seed 1: phases 5-3 came sooner, phase 2 took 20 min
+    #   instead of 10, the full task came 4 min later; no gain shown);
     # - the adaptive curriculum over two-room's phases 6 -> 1 (no undirected exploration found
     #   the full task's reward), with the evaluation actor on the full task every 500k steps;
     #   30% of the episodes review a passed phase, so rewards keep flowing after a switch
@@ -262,14 +266,17 @@ PRESETS: dict[str, dict[str, Any]] = {
     #   idle. Seeds 0 and 1 reached the full task at 31.7 and 33.5 min (0.05: 37.1 min and
     #   never; 0.1 was worse still). Free-running (0.007) starves the learner of its core;
     # - unstick: a random action after a step that left the frame unchanged (a greedy policy
-    #   facing a wall otherwise repeats itself); it doubles the episodes that reach room 2.
+    #   facing a wall otherwise repeats itself); it doubles the episodes that reach room 2. The
+    #   evaluation actor unsticks too, so it scores the policy the training actors play at
+    #   epsilon 0.01 (`python -m dqn_mine.evaluate RUN` without --unstick scores it without).
     "cpu": {
         "task": "two-room", "actors": 2, "envs_per_actor": 16, "unstick": True,
         "epsilon_schedule": "apex", "exploration": "ez", "curriculum": "adaptive",
         "curriculum_review": 0.3, "replay_ratio": 0.03,
         "prefill": 20_000, "replay_capacity": 262_144, "updates": 300_000,
         "lr": 1e-4, "target_update_interval": 1000, "publish_interval": 250,
-        "eval_every": 500_000, "checkpoint_interval": 10_000, "log_interval": 500,
+        "eval_every": 500_000, "eval_unstick": True, "checkpoint_interval": 10_000,
+        "log_interval": 500,
     },
 }
 

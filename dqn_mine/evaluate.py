@@ -106,7 +106,8 @@ def main(argv=None) -> int:
         check_settings(args)
         from dqn_mine import load_agent
 
-        agent = load_agent(args.checkpoint, epsilon=args.epsilon, seed=args.seed)
+        agent = load_agent(args.checkpoint, epsilon=args.epsilon, seed=args.seed,
+                           unstick=args.unstick)
         fill_env_settings(args)
         env = make_env(args)
     except ValueError as exc:  # bad settings, or CheckpointError (a ValueError)
@@ -120,7 +121,8 @@ def main(argv=None) -> int:
             save_video(frames, Path(args.video), 15.0)
     finally:
         env.close()
-    scores.update(task=args.task, epsilon=args.epsilon, checkpoint=str(args.checkpoint))
+    scores.update(task=args.task, epsilon=args.epsilon, unstick=args.unstick,
+                  checkpoint=str(args.checkpoint))
     out = output_path(args)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(scores, indent=1))

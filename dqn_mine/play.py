@@ -38,7 +38,8 @@ def agent_policy(args: argparse.Namespace) -> Policy:
     """A trained network from --checkpoint (a run folder or a .pt file), near-greedy."""
     from dqn_mine.agent.policy import AgentPolicy
 
-    return AgentPolicy.from_checkpoint(args.checkpoint, epsilon=args.epsilon, seed=args.seed)
+    return AgentPolicy.from_checkpoint(args.checkpoint, epsilon=args.epsilon, seed=args.seed,
+                                       unstick=args.unstick)
 
 
 POLICIES: dict[str, Callable[[argparse.Namespace], Policy]] = {
@@ -125,6 +126,8 @@ def check_video_path(out: Path, flag: str) -> None:
 def add_episode_arguments(ap: argparse.ArgumentParser) -> None:
     """The flags that set up the episodes (``play`` and ``evaluate`` share them)."""
     ap.add_argument("--epsilon", type=float, default=0.0, help="agent's exploration rate")
+    ap.add_argument("--unstick", action="store_true", help="agent: a random action after a step "
+                    "that left the frame unchanged (as training actors with --unstick act)")
     ap.add_argument("--task", default=None, help="one-room, two-room, three-room or rooms "
                     "(default: the checkpoint's, else two-room, as for train)")
     ap.add_argument("--num-rooms", type=int, default=None,

@@ -89,6 +89,32 @@ def test_agent_policy_feeds_the_network_what_a_training_actor_feeds_it():
         env.close()
 
 
+def _noop_net() -> DuelingQNetwork:
+    """Greedy action: the no-op, whatever it sees."""
+    net = DuelingQNetwork(history_len=3).eval()
+    with torch.no_grad():
+        for p in net.parameters():
+            p.zero_()
+        net.advantage[-1].bias[5] = 1.0
+    return net
+
+
+def test_agent_policy_unsticks_only_when_asked():
+    """Fed the same frame again (a no-op changes nothing), the unsticking policy acts randomly
+    from the second step on; the plain one repeats its greedy no-op."""
+    frame = np.full(FRAME_SHAPE, 7, np.uint8)
+    actions = {}
+    for unstick in (False, True):
+        policy = AgentPolicy(_noop_net(), frame_stack=1, history_len=3, seed=4, unstick=unstick)
+        policy.reset()
+        actions[unstick] = [policy.predict(frame) for _ in range(60)]
+    assert actions[False] == [5] * 60
+    assert actions[True][0] == 5                       # nothing seen before: not stuck
+    random_part = np.array(actions[True][1:])
+    assert (random_part != 5).mean() > 0.6             # uniform: 5 of 6 actions are not the no-op
+    assert len(set(random_part.tolist())) == 6
+
+
 def test_episode_stats_keep_training_and_evaluation_apart():
     from dqn_mine.config import parse_args
 

@@ -13,6 +13,7 @@ from dqn_mine.replay import ReplayStorage
 from dqn_mine.shared import SharedBlocks
 from dqn_mine.system.actor import Actor
 from dqn_mine.system.control import Control
+from dqn_mine.system.evaluator import EvalActor
 from dqn_mine.system.layout import replay_layout, run_block_specs
 from dqn_mine.system.specs import actor_specs
 from dqn_mine.system.weights import WeightBroadcast
@@ -113,6 +114,27 @@ def test_unstick_turns_a_stuck_greedy_policy_random_only_while_stuck():
     assert (taken[1:][stuck[:-1]] != 5).mean() > 0.6     # uniform: 5 of 6 are not the no-op
     assert (taken[1:][~stuck[:-1]] == 5).all()
     assert 0.2 < stuck.mean() < 0.9
+
+
+def test_evaluation_actor_unsticks_only_with_eval_unstick():
+    """The training actors' --unstick does not reach the evaluation actor; --eval-unstick does,
+    and held ez actions never do."""
+    base = dataclasses.replace(Config(**PRESETS["cpu"], preset="cpu"), actors=1,
+                               envs_per_actor=1, replay_capacity=4096, eval_every=1000,
+                               eval_episodes=1)
+    net = DuelingQNetwork(frame_stack=base.frame_stack, history_len=base.history_len)
+    for eval_unstick in (False, True):
+        cfg = dataclasses.replace(base, eval_unstick=eval_unstick).validate()
+        with SharedBlocks.create(run_block_specs(cfg, net)) as blocks:
+            weights = WeightBroadcast(blocks)
+            weights.publish(net)
+            actor = EvalActor(cfg, actor_specs(cfg)[-1], Control(blocks), weights)
+            try:
+                explorer = actor.core.explorer
+                assert explorer.unstick is eval_unstick and not explorer.durations
+                assert list(explorer.epsilon) == [cfg.eval_epsilon]
+            finally:
+                actor.close()
 
 
 def test_actor_ends_easier_phases_at_the_curriculum_step_limit():

@@ -303,6 +303,30 @@ def test_pick_up_and_drop(envs):
     assert _red_pixels(obs) > 0
 
 
+def test_a_held_boulder_leaves_the_kit_ahead_in_view(envs):
+    """Carrying the boulder out of the doorway, the agent must still see the kit it walks to:
+    the held item fills only the bottom rows, so a kit 3-8 units straight ahead shows."""
+    env = get(envs, dict(task="two-room", phase=3))
+    env.reset(seed=3)
+    assert env.carrying is not None and env.carrying.kind == BOULDER
+    kit = env.kit
+    for angle in [2 * math.pi * k / 16 for k in range(16)]:
+        spots = [(kit.x - d * math.cos(angle), kit.z - d * math.sin(angle)) for d in (3, 5, 8)]
+        if all(env.agent_fits(x, z) and not env.layout.crosses_wall(x, z, kit.x, kit.z)
+               for x, z in spots):
+            break
+    else:
+        pytest.fail("no clear line to the kit")
+    for x, z in spots:
+        face(env, x, z, kit.x, kit.z)
+        env.step(NOOP)
+        assert _red_pixels(env._last_obs) > 0, f"the kit {math.hypot(x - kit.x, z - kit.z):.0f} " \
+            "units ahead is hidden by the held boulder"
+    held = _grey_mask(env._last_obs)
+    h, w = held.shape
+    assert held[h - 3:, w // 3: 2 * w // 3].any(), "the boulder is still drawn in hand"
+
+
 def test_drop_needs_room(envs):
     env = get(envs, dict(task="one-room"))
     env.reset(seed=4)
@@ -517,6 +541,11 @@ def test_env_does_not_import_torch():
 def _red_mask(obs):
     r, g, b = (obs[i].astype(int) for i in range(3))
     return (r > 120) & (g < 60) & (b < 60)
+
+
+def _grey_mask(obs):
+    r, g, b = (obs[i].astype(int) for i in range(3))
+    return (abs(r - g) < 12) & (abs(g - b) < 12) & (r > 90)
 
 
 def _red_pixels(obs):

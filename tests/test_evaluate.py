@@ -51,6 +51,11 @@ def test_evaluate_writes_eval_json_and_is_reproducible(run_dir, tmp_path):
     same = json.loads((tmp_path / "again.json").read_text())
     assert {k: same[k] for k in FIELDS} == {k: scores[k] for k in FIELDS}   # same seeds, same play
     assert (tmp_path / "e.gif").stat().st_size > 0
+    assert scores["unstick"] is False
+    unstuck = evaluate(str(run_dir), "--episodes", "1", "--max-steps", "25", "--unstick",
+                       "--out", str(tmp_path / "unstuck.json"))
+    assert unstuck.returncode == 0, unstuck.stderr
+    assert json.loads((tmp_path / "unstuck.json").read_text())["unstick"] is True
 
 
 def test_load_agent_plays_an_episode_like_the_readme(run_dir):

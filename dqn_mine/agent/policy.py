@@ -23,17 +23,18 @@ class AgentPolicy:
     """
 
     def __init__(self, net: DuelingQNetwork, frame_stack: int, history_len: int,
-                 epsilon: float = 0.0, seed: int = 0):
+                 epsilon: float = 0.0, seed: int = 0, unstick: bool = False):
         self.net = net.eval()
         self.frame_stack, self.history_len = frame_stack, history_len
         self.epsilon = epsilon
         self.rng = np.random.default_rng(seed)
-        explorer = Explorer(epsilon, 1, self.rng)
+        explorer = Explorer(epsilon, 1, self.rng, unstick=unstick)
         self.core = ActingCore(self.net, explorer, 1, frame_stack, history_len)
         self.last_action: int | None = None   # None: the next observation starts an episode
 
     @classmethod
-    def from_checkpoint(cls, path, epsilon: float = 0.0, seed: int = 0) -> AgentPolicy:
+    def from_checkpoint(cls, path, epsilon: float = 0.0, seed: int = 0,
+                        unstick: bool = False) -> AgentPolicy:
         """Raises CheckpointError (one line) for a missing or corrupt checkpoint."""
         from dqn_mine import checkpoint as ckpt
         from dqn_mine.config import network_shape
@@ -46,7 +47,7 @@ class AgentPolicy:
         except (RuntimeError, TypeError) as exc:  # wrong or damaged tensors
             raise ckpt.CheckpointError(f"{path}: the network weights do not fit "
                                        f"({str(exc).splitlines()[0]})") from None
-        return cls(net, shape["frame_stack"], shape["history_len"], epsilon, seed)
+        return cls(net, shape["frame_stack"], shape["history_len"], epsilon, seed, unstick)
 
     def reset(self) -> None:
         self.last_action = None
@@ -55,7 +56,8 @@ class AgentPolicy:
         return self.predict(obs, info)
 
     def predict(self, obs: np.ndarray, info: dict | None = None) -> int:
-        """The action for ``obs`` (uint8 [3, H, W]); greedy unless ``epsilon`` > 0."""
+        """The action for ``obs`` (uint8 [3, H, W]); greedy unless ``epsilon`` > 0 (or, with
+        ``unstick``, the last step left the frame unchanged)."""
         carrying = bool((info or {}).get("carrying", False))
         if self.last_action is None:
             self.core.begin(0, obs, carrying)

@@ -49,12 +49,16 @@ REACH_RADIUS = 0.6                 # ... and its radius
 # (docs/exploration.md).
 CARRY_AHEAD_FACTOR = 1.05
 NEAR_STEPS = 1.1
-# The carried item is drawn where it is held, its top this far below the eye (MiniWorld lifts a
-# carried entity to camera height - its height - 0.3). It shows at the bottom centre of the view,
-# so the agent sees *what* it carries: the carrying flag alone cannot tell the kit from a boulder.
-# Unlike MiniWorld a tall item is sunk rather than stood on the floor, so a boulder (1.6 high,
-# above the eye) does not blind the agent while it carries it out of a doorway.
-HELD_TOP_BELOW_EYE = 0.3
+# The carried item is drawn where it is held, sunk so that its top lies this many degrees below
+# the line of sight: it fills only the bottom rows of the view, centred, so the agent sees *what*
+# it carries (the carrying flag alone cannot tell the kit from a boulder). Drawn higher (its top
+# 0.3 below the eye, as MiniWorld lifts a carried entity), a held boulder covered the lower
+# middle of the view, where the floor 2.6-8 units ahead shows, and hid a kit straight ahead at
+# every distance the agent walks towards it from: an agent carrying the boulder out of the
+# doorway could find the kit only from the side. At 25 degrees a kit on the floor ahead is
+# hidden only within about 3 units, where it leaves the view anyway (the floor's nearest
+# visible point is 2.6 units ahead).
+HELD_TOP_ANGLE = 25.0
 DROP_GAP = 0.1                     # space between the agent and an item it puts down
 DOOR_CLEARANCE = 2.5               # kit, miner and agent start at least this far from doorways
 ASIDE_CLEARANCE = 3.5              # boulders moved aside lie at least this far from doorways
@@ -366,7 +370,8 @@ class MineEnv(gym.Env):
             return np.zeros((0, mesh.VERTEX_FLOATS), np.float32)
         local = local_mesh(item.kind)
         out = mesh.place(local, _carry_ahead(item), 0.0, 1.0, 0.0)
-        out[:, 1] += EYE_HEIGHT - HELD_TOP_BELOW_EYE - local[:, 1].max()
+        below_eye = _carry_ahead(item) * math.tan(math.radians(HELD_TOP_ANGLE))
+        out[:, 1] += EYE_HEIGHT - below_eye - local[:, 1].max()
         return out
 
     def _observe(self) -> np.ndarray:

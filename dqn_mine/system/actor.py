@@ -36,12 +36,12 @@ class ActorBase:
         self.parent_pid = parent_pid
         self.next_parent_check = 0.0
         self.rng = np.random.default_rng(spec.seed)
-        # Held actions and unsticking are for training only: the evaluation actor measures the
-        # near-greedy policy with plain epsilon.
+        # Held actions are for training only: the evaluation actor measures the near-greedy
+        # policy with plain epsilon, unstuck only when asked (--eval-unstick).
         explorer = Explorer(spec.epsilon, spec.num_envs, self.rng,
                             durations=cfg.exploration == "ez" and training,
                             mu=cfg.ez_mu, max_duration=cfg.ez_max_duration,
-                            unstick=cfg.unstick and training)
+                            unstick=cfg.unstick if training else cfg.eval_unstick)
         self.net = DuelingQNetwork(**network_shape(cfg))
         # Pulled float32 weights are converted on load (WeightBroadcast copies into the tensors).
         self.net.to(resolve_actor_precision(cfg.actor_precision, spec.num_envs)).eval()
