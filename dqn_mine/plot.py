@@ -19,7 +19,7 @@ from pathlib import Path
 
 from dqn_mine.config import Config
 from dqn_mine.exitcodes import EXIT_BAD_INPUT
-from dqn_mine.metrics import read_metrics
+from dqn_mine.metrics import LOW_EPSILON, read_metrics
 
 
 def load_run(run_dir: Path) -> list[dict]:
@@ -79,7 +79,7 @@ def milestone_table(runs: dict, configs: dict, levels) -> str:
     last full-task return, and (where logged) that of the envs at epsilon <= 0.01."""
     low_eps = any(has_values(rows, "low_eps_return") for rows in runs.values())
     head = " | ".join(f"return {lv:g}: updates, minutes" for lv in levels)
-    extra = " | last at epsilon <= 0.01" if low_eps else ""
+    extra = f" | last at epsilon <= {LOW_EPSILON:g}" if low_eps else ""
     lines = [f"| run | {head} | last full-task return{extra} |",
              "|---" * (len(levels) + 2 + low_eps) + "|"]
     for label, rows in runs.items():
@@ -139,7 +139,7 @@ def plot_runs(runs: dict, out: Path) -> Path:
             ax.plot(xs, column(rows, "episode_return"), color=color, lw=2, label=label)
             if has_values(rows, "low_eps_return"):   # runs from before it was logged lack it
                 ax.plot(xs, column(rows, "low_eps_return"), color=color, lw=1.2, ls=":",
-                        label=f"{label} (envs at epsilon <= 0.01)")
+                        label=f"{label} (envs at epsilon <= {LOW_EPSILON:g})")
             if has_values(rows, "eval_return"):
                 ax.plot(xs, column(rows, "eval_return"), color=color, lw=1.5, ls="--",
                         label=f"{label} (evaluation, full task)")

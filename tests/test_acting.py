@@ -89,23 +89,14 @@ def test_agent_policy_feeds_the_network_what_a_training_actor_feeds_it():
         env.close()
 
 
-def _noop_net() -> DuelingQNetwork:
-    """Greedy action: the no-op, whatever it sees."""
-    net = DuelingQNetwork(history_len=3).eval()
-    with torch.no_grad():
-        for p in net.parameters():
-            p.zero_()
-        net.advantage[-1].bias[5] = 1.0
-    return net
-
-
-def test_agent_policy_unsticks_only_when_asked():
+def test_agent_policy_unsticks_only_when_asked(noop_network):
     """Fed the same frame again (a no-op changes nothing), the unsticking policy acts randomly
     from the second step on; the plain one repeats its greedy no-op."""
     frame = np.full(FRAME_SHAPE, 7, np.uint8)
     actions = {}
     for unstick in (False, True):
-        policy = AgentPolicy(_noop_net(), frame_stack=1, history_len=3, seed=4, unstick=unstick)
+        policy = AgentPolicy(noop_network(history_len=3), frame_stack=1, history_len=3, seed=4,
+                             unstick=unstick)
         policy.reset()
         actions[unstick] = [policy.predict(frame) for _ in range(60)]
     assert actions[False] == [5] * 60

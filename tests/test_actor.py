@@ -20,13 +20,20 @@ from dqn_mine.system.weights import WeightBroadcast
 
 
 @contextlib.contextmanager
-def in_process_actor(cfg, net, spec=None, phase=0):
-    """An actor of ``cfg`` in this process, acting on ``net``'s published weights; ``phase``:
-    the curriculum phase in the shared control block when it starts."""
+def _run_blocks(cfg, net, phase=0):
+    """The run's shared blocks with ``net``'s weights published and ``phase`` set."""
     with SharedBlocks.create(run_block_specs(cfg, net)) as blocks:
         blocks["ctl_phase"][0] = phase
         weights = WeightBroadcast(blocks)
         weights.publish(net)
+        yield blocks, weights
+
+
+@contextlib.contextmanager
+def in_process_actor(cfg, net, spec=None, phase=0):
+    """An actor of ``cfg`` in this process, acting on ``net``'s published weights; ``phase``:
+    the curriculum phase in the shared control block when it starts."""
+    with _run_blocks(cfg, net, phase) as (blocks, weights):
         actor = Actor(cfg, spec or actor_specs(cfg)[0],
                       ReplayStorage(replay_layout(cfg), blocks), Control(blocks), weights)
         try:
@@ -81,18 +88,8 @@ def test_ez_actor_holds_random_motions_with_one_rate_per_env():
         assert actor.steps == 600
 
 
-def _noop_network(cfg) -> DuelingQNetwork:
-    """A network whose greedy action is the no-op everywhere: the frame never changes."""
-    net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
-    with torch.no_grad():
-        for p in net.parameters():
-            p.zero_()
-        net.advantage[-1].bias[5] = 1.0
-    return net
-
-
-def _actions_taken(cfg, steps: int):
-    with in_process_actor(cfg, _noop_network(cfg)) as actor:
+def _actions_taken(cfg, steps: int, net):
+    with in_process_actor(cfg, net) as actor:
         actor.core.explorer.epsilon[:] = 0.0
         taken, stuck = [], []
         for _ in range(steps):
@@ -102,13 +99,14 @@ def _actions_taken(cfg, steps: int):
         return np.array(taken), np.array(stuck)            # [T, E]
 
 
-def test_unstick_turns_a_stuck_greedy_policy_random_only_while_stuck():
+def test_unstick_turns_a_stuck_greedy_policy_random_only_while_stuck(noop_network):
     cfg = dataclasses.replace(Config(**PRESETS["smoke"], preset="smoke"), actors=1,
                               envs_per_actor=2, replay_capacity=4096, eval_every=0)
-    taken, stuck = _actions_taken(cfg.validate(), 40)
+    net = noop_network(cfg.frame_stack, cfg.history_len)
+    taken, stuck = _actions_taken(cfg.validate(), 40, net)
     assert (taken == 5).all(), "without unstick a no-op policy never moves"
     assert not stuck.any(), "and the actor does not compare frames it has no use for"
-    taken, stuck = _actions_taken(dataclasses.replace(cfg, unstick=True).validate(), 40)
+    taken, stuck = _actions_taken(dataclasses.replace(cfg, unstick=True).validate(), 40, net)
     # a no-op leaves the frame as it was, so the step after it is random; a random step that
     # moved or turned gives the greedy no-op back
     assert (taken[1:][stuck[:-1]] != 5).mean() > 0.6     # uniform: 5 of 6 are not the no-op
@@ -125,9 +123,7 @@ def test_evaluation_actor_unsticks_only_with_eval_unstick():
     net = DuelingQNetwork(frame_stack=base.frame_stack, history_len=base.history_len)
     for eval_unstick in (False, True):
         cfg = dataclasses.replace(base, eval_unstick=eval_unstick).validate()
-        with SharedBlocks.create(run_block_specs(cfg, net)) as blocks:
-            weights = WeightBroadcast(blocks)
-            weights.publish(net)
+        with _run_blocks(cfg, net) as (blocks, weights):
             actor = EvalActor(cfg, actor_specs(cfg)[-1], Control(blocks), weights)
             try:
                 explorer = actor.core.explorer

@@ -368,9 +368,9 @@ class MineEnv(gym.Env):
         item = self.carrying
         if item is None:
             return np.zeros((0, mesh.VERTEX_FLOATS), np.float32)
-        local = local_mesh(item.kind)
-        out = mesh.place(local, _carry_ahead(item), 0.0, 1.0, 0.0)
-        below_eye = _carry_ahead(item) * math.tan(math.radians(HELD_TOP_ANGLE))
+        local, ahead = local_mesh(item.kind), _carry_ahead(item)
+        out = mesh.place(local, ahead, 0.0, 1.0, 0.0)
+        below_eye = ahead * math.tan(math.radians(HELD_TOP_ANGLE))
         out[:, 1] += EYE_HEIGHT - below_eye - local[:, 1].max()
         return out
 
