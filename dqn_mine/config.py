@@ -32,6 +32,7 @@ EPSILON_SCHEDULES = ("fixed", "apex")
 INIT_PRIORITIES = ("actor", "max")
 CURRICULA = ("none", "adaptive", "schedule")
 EXPLORATIONS = ("epsilon", "ez")
+REVIEW_PICKS = ("uniform", "nearest")
 
 
 DIFFERENCES_KEY = "differs_from_preset"   # in config.json: what the flags changed
@@ -68,6 +69,10 @@ class Config:
     curriculum_window: int = _f(50, "episodes in the rolling mean that advances the curriculum")
     curriculum_review: float = _f(0.0, "adaptive curriculum: share of episodes that start in an "
                                   "easier phase already passed (0 = the study's rule)")
+    curriculum_review_pick: str = _f("uniform", "which passed phase a review episode starts "
+                                     "in: uniform, or nearest (the phase k steps easier with "
+                                     "weight 2**-k: most often the one just passed)",
+                                     REVIEW_PICKS)
     curriculum_steps: Optional[int] = _f(None, "adaptive curriculum: step limit of episodes that "
                                          "start in a phase easier than the full task (none = "
                                          "the task's limit)")
@@ -87,9 +92,10 @@ class Config:
     ez_mu: float = _f(2.0, "ez exploration: durations n drawn with p(n) ~ n**-mu")
     ez_max_duration: int = _f(100, "ez exploration: longest duration of a held random action")
     prefill: int = _f(50_000, "environment steps per actor before the learner starts")
-    actor_precision: str = _f("auto", "actors' network weights: bfloat16 (faster where the CPU "
-                              "computes it natively), float32, or auto (bfloat16 where native "
-                              "and --envs-per-actor >= 8)", ACTOR_PRECISIONS)
+    actor_precision: str = _f("auto", "actors' convolutions and first head layers: bfloat16 "
+                              "(faster where the CPU computes it natively; the output layers "
+                              "stay float32), float32, or auto (bfloat16 where native and "
+                              "--envs-per-actor >= 8)", ACTOR_PRECISIONS)
     # -- learner -----------------------------------------------------------------------------
     updates: int = _f(1_000_000, "network updates to train for")
     lr: float = _f(3e-5, "Adam learning rate")
@@ -297,7 +303,8 @@ def _choice_problems(c: Config) -> list[str]:
     if c.tensorboard and importlib.util.find_spec("tensorboard") is None:
         p.append("--tensorboard needs the tensorboard package (pip install -e .[tb])")
     for name in ("task", "placement", "curriculum", "epsilon_schedule", "init_priority",
-                 "device", "actor_precision", "learner_precision", "exploration"):
+                 "device", "actor_precision", "learner_precision", "exploration",
+                 "curriculum_review_pick"):
         choices = _field(name).metadata["choices"]
         if getattr(c, name) not in choices:
             p.append(f"--{_flag(name)}: unknown value {getattr(c, name)!r} "

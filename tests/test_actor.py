@@ -50,7 +50,9 @@ def test_bfloat16_actor_acts_on_the_published_weights():
     learner_net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
     with in_process_actor(cfg, learner_net) as actor:
         assert actor.version == 1
-        assert {p.dtype for p in actor.net.parameters()} == {torch.bfloat16}
+        # heavy layers in bfloat16, output layers float32 (action gaps keep float32 precision)
+        assert {p.dtype for p in actor.net.conv.parameters()} == {torch.bfloat16}
+        assert {p.dtype for p in actor.net.advantage[2].parameters()} == {torch.float32}
         for _ in range(30):
             actor.step()
         core = actor.core
@@ -61,6 +63,7 @@ def test_bfloat16_actor_acts_on_the_published_weights():
                                    torch.from_numpy(core.carrying)).numpy()
         assert q.dtype == expected.dtype and q.shape == (2, 6)
         assert abs(q - expected).max() < 0.02 * abs(expected).max()
+        assert (q.argmax(1) == expected.argmax(1)).all()
         assert actor.steps == 60
         for writer in actor.writers:                   # publish what close() would
             writer.flush()

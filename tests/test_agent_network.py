@@ -1,9 +1,11 @@
 """The dueling network: shapes, input encoding, dueling combination."""
 
+import copy
+
 import pytest
 import torch
 
-from dqn_mine.agent.network import DuelingQNetwork, one_hot_history
+from dqn_mine.agent.network import DuelingQNetwork, lower_heavy_layers, one_hot_history
 
 
 def inputs(batch, frame_stack=1, history_len=20, seed=0):
@@ -67,21 +69,25 @@ def test_empty_history_slots_differ_from_any_action():
         assert not torch.allclose(outs[0], outs[a])
 
 
-def test_bfloat16_weights_give_close_q_values_and_the_same_greedy_actions():
-    """Actors may act with a bfloat16 copy of the network (--actor-precision): the input is
-    converted to the weights' dtype inside, and the Q-values stay within bfloat16's precision."""
+def test_lowered_network_keeps_float32_greedy_actions_at_sparse_reward_gaps():
+    """Actors act with the heavy layers in bfloat16 (--actor-precision). With Q-values near 0.4
+    and gaps of ~1e-3 between the best actions, as in a 1,000-step sparse-reward task at gamma
+    0.99, a network rounded to bfloat16 to its end ties or swaps its best actions (bfloat16's
+    spacing at 0.4 is 0.002); with the output layers in float32 it picks the float32 argmax."""
     torch.manual_seed(0)
     net = DuelingQNetwork().eval()
-    low = DuelingQNetwork().eval()
-    low.load_state_dict(net.state_dict())
-    low.to(torch.bfloat16)
-    obs, history, carrying = inputs(64)
+    with torch.no_grad():
+        net.value[2].bias.fill_(0.4)
+        net.advantage[2].weight.mul_(0.05)
+    lowered = lower_heavy_layers(copy.deepcopy(net), torch.bfloat16)
+    all_bf16 = copy.deepcopy(net).to(torch.bfloat16)
+    obs, history, carrying = inputs(256)
     with torch.inference_mode():
-        q32, q16 = net(obs, history, carrying), low(obs, history, carrying)
-    assert q16.dtype == torch.bfloat16 and q32.dtype == torch.float32
-    scale = q32.abs().max().item()
-    assert (q16.float() - q32).abs().max().item() < 0.02 * scale
-    margin = q32.topk(2, dim=1).values.diff(dim=1).abs().squeeze(1)   # best minus second best
-    clear = margin > 0.05 * scale                   # rounding cannot swap a clear winner
-    assert clear.sum() > 16
-    assert torch.equal(q16.float().argmax(1)[clear], q32.argmax(1)[clear])
+        q32, q_low, q_all = (n(obs, history, carrying) for n in (net, lowered, all_bf16))
+    gaps = q32.topk(2, dim=1).values.diff(dim=1).abs().squeeze(1)
+    assert gaps.median() < 0.003                           # the regime of interest
+    assert q_low.dtype == torch.float32 and lowered.conv[0].weight.dtype == torch.bfloat16
+    assert (q_low - q32).abs().max() < 1e-3
+    assert torch.equal(q_low.argmax(1), q32.argmax(1))
+    ties = (q_all == q_all.max(dim=1, keepdim=True).values).sum(1) > 1
+    assert ties.float().mean() > 0.1                       # what the float32 output layers avoid

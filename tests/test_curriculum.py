@@ -213,3 +213,20 @@ def test_metrics_nan_cells_are_empty(tmp_path, value):
     table.close()
     row = read_metrics(tmp_path / "m.csv")[0]
     assert row["update"] == 1 and row["loss"] == 0.5 and math.isnan(row["eval_return"])
+
+
+def test_nearest_review_favours_the_phase_just_passed():
+    """From phase 2 of two-room, "nearest" review draws phase 2+k with weight 2**-k: 8/15,
+    4/15, 2/15 and 1/15 of the reviewed share for phases 3, 4, 5 and 6."""
+    import numpy as np
+
+    cfg = parse_args(["--curriculum", "adaptive", "--curriculum-review", "0.4",
+                      "--curriculum-review-pick", "nearest"])
+    rng = np.random.default_rng(1)
+    drawn = np.array([Curriculum(cfg).review_phase(2, rng) for _ in range(30_000)])
+    shares = np.array([np.mean(drawn == p) for p in (1, 2, 3, 4, 5, 6)])
+    expected = np.array([0, 0.6, 0.4 * 8 / 15, 0.4 * 4 / 15, 0.4 * 2 / 15, 0.4 / 15])
+    assert np.abs(shares - expected).max() < 0.012, shares
+    assert {Curriculum(cfg).review_phase(6, rng) for _ in range(50)} == {6}
+    # one phase passed: review always draws it
+    assert set(Curriculum(cfg).review_phase(5, rng) for _ in range(200)) == {5, 6}

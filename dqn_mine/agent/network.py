@@ -88,6 +88,21 @@ def _stream(stream: nn.Sequential, features: torch.Tensor) -> torch.Tensor:
     return stream[2](hidden.to(stream[2].weight.dtype))
 
 
+def lower_heavy_layers(net: DuelingQNetwork, dtype: torch.dtype) -> DuelingQNetwork:
+    """Cast the layers that hold nearly all the compute (convolutions, first layer of each
+    stream) to ``dtype`` in place; the output layers stay float32.
+
+    Why the output layers stay: Q-values of a sparse-reward task sit near 0.1-0.6 while the
+    gaps between actions are ~1e-3 (gamma = 0.99, a detour of one or two steps). bfloat16's
+    spacing there is 1e-3 to 4e-3, so a network computed in bfloat16 to the end ties or swaps
+    its best actions (measured: 28% ties at a median gap of 0.0018, argmax then taking action 0)
+    while these layers in float32 reproduce the float32 argmax exactly, at a cost of two
+    128-wide layers."""
+    for layer in (net.conv, net.value[0], net.advantage[0]):
+        layer.to(dtype)
+    return net
+
+
 class WorkingCopy:
     """A copy of a network whose heavy layers (convolutions, first layer of each stream) compute
     in ``dtype``, for a learner that keeps float32 master weights and optimiser state.
@@ -99,9 +114,7 @@ class WorkingCopy:
     """
 
     def __init__(self, master: DuelingQNetwork, dtype: torch.dtype):
-        self.net = copy.deepcopy(master)
-        for layer in (self.net.conv, self.net.value[0], self.net.advantage[0]):
-            layer.to(dtype)
+        self.net = lower_heavy_layers(copy.deepcopy(master), dtype)
         self.net.prescaled = True
         self._pairs = list(zip(master.parameters(), self.net.parameters()))
         self._first = self.net.conv[0].weight

@@ -24,7 +24,7 @@ import torch
 from torch import nn
 
 from dqn_mine.agent.learning import DQNUpdater, batch_to_device
-from dqn_mine.agent.network import DuelingQNetwork
+from dqn_mine.agent.network import DuelingQNetwork, lower_heavy_layers
 from dqn_mine.config import native_bf16
 from dqn_mine.replay import Batch
 
@@ -235,7 +235,7 @@ def _row(device, threads, b: int, precision: str, rates: dict[str, float],
 
 def inference_rate(batch: int, seconds: float, dtype=torch.float32) -> float:
     torch.manual_seed(0)
-    net = DuelingQNetwork().to(dtype).eval()   # as an actor holds it (--actor-precision)
+    net = lower_heavy_layers(DuelingQNetwork(), dtype).eval()   # as an actor holds it
     data = synthetic_batch(batch)
     obs, hist, carrying = (torch.from_numpy(data.obs), torch.from_numpy(data.history),
                            torch.from_numpy(data.carrying))

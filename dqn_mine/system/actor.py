@@ -27,7 +27,7 @@ class ActorBase:
                  parent_pid: int | None = None, render_mode: str | None = None):
         from dqn_mine.agent.acting import ActingCore
         from dqn_mine.agent.explore import Explorer
-        from dqn_mine.agent.network import DuelingQNetwork
+        from dqn_mine.agent.network import DuelingQNetwork, lower_heavy_layers
         from dqn_mine.env import MineRescueEnv
 
         self.cfg, self.spec, self.control, self.weights = cfg, spec, control, weights
@@ -42,9 +42,10 @@ class ActorBase:
                             durations=cfg.exploration == "ez" and training,
                             mu=cfg.ez_mu, max_duration=cfg.ez_max_duration,
                             unstick=cfg.unstick if training else cfg.eval_unstick)
-        self.net = DuelingQNetwork(**network_shape(cfg))
         # Pulled float32 weights are converted on load (WeightBroadcast copies into the tensors).
-        self.net.to(resolve_actor_precision(cfg.actor_precision, spec.num_envs)).eval()
+        self.net = lower_heavy_layers(DuelingQNetwork(**network_shape(cfg)),
+                                      resolve_actor_precision(cfg.actor_precision,
+                                                              spec.num_envs)).eval()
         self.version = -1            # of the weights loaded (WeightBroadcast's publish count)
         self.pull_weights()
         self.envs = [MineRescueEnv(**spec.env_kwargs, render_mode=render_mode)
