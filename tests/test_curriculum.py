@@ -222,11 +222,11 @@ def test_nearest_review_favours_the_phase_just_passed():
 
     cfg = parse_args(["--curriculum", "adaptive", "--curriculum-review", "0.4",
                       "--curriculum-review-pick", "nearest"])
-    rng = np.random.default_rng(1)
-    drawn = np.array([Curriculum(cfg).review_phase(2, rng) for _ in range(30_000)])
+    rng, curriculum = np.random.default_rng(1), Curriculum(cfg)
+    drawn = np.array([curriculum.review_phase(2, rng) for _ in range(30_000)])
     shares = np.array([np.mean(drawn == p) for p in (1, 2, 3, 4, 5, 6)])
     expected = np.array([0, 0.6, 0.4 * 8 / 15, 0.4 * 4 / 15, 0.4 * 2 / 15, 0.4 / 15])
     assert np.abs(shares - expected).max() < 0.012, shares
-    assert {Curriculum(cfg).review_phase(6, rng) for _ in range(50)} == {6}
+    assert {curriculum.review_phase(6, rng) for _ in range(50)} == {6}
     # one phase passed: review always draws it
-    assert set(Curriculum(cfg).review_phase(5, rng) for _ in range(200)) == {5, 6}
+    assert set(curriculum.review_phase(5, rng) for _ in range(200)) == {5, 6}

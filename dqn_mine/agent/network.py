@@ -64,9 +64,10 @@ class DuelingQNetwork(nn.Module):
                 carrying: torch.Tensor) -> torch.Tensor:
         """obs uint8 [B, 3f, H, W], history int [B, h] (-1: none), carrying float [B] -> Q [B, A]
 
-        Each stage computes in the dtype of its own weights: all float32, all bfloat16 (actors
-        that act in it), or mixed (the learner's bfloat16 ``WorkingCopy``), whose output layers
-        stay float32 so that Q-values and their action gaps keep float32 precision.
+        Each stage computes in the dtype of its own weights: all float32, or mixed
+        (:func:`lower_heavy_layers`: bfloat16 actors and the learner's ``WorkingCopy``), whose
+        output layers stay float32 so that Q-values and their action gaps keep float32
+        precision.
         """
         x = obs.to(self.conv[0].weight.dtype)
         if not self.prescaled:
@@ -95,9 +96,9 @@ def lower_heavy_layers(net: DuelingQNetwork, dtype: torch.dtype) -> DuelingQNetw
     Why the output layers stay: Q-values of a sparse-reward task sit near 0.1-0.6 while the
     gaps between actions are ~1e-3 (gamma = 0.99, a detour of one or two steps). bfloat16's
     spacing there is 1e-3 to 4e-3, so a network computed in bfloat16 to the end ties or swaps
-    its best actions (measured: 28% ties at a median gap of 0.0018, argmax then taking action 0)
-    while these layers in float32 reproduce the float32 argmax exactly, at a cost of two
-    128-wide layers."""
+    its best actions, and argmax then takes action 0 (on a trained two-room network it changed
+    the greedy action in 4.5-5.9% of the visited states, against 0-0.9% with these layers in
+    float32), at a cost of two 128-wide layers."""
     for layer in (net.conv, net.value[0], net.advantage[0]):
         layer.to(dtype)
     return net
