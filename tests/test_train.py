@@ -295,11 +295,15 @@ def test_smoke_preset_learns_one_room(tmp_path):
                     timeout=1500)
     assert res.returncode == 0, res.stderr[-3000:]
     rows = metrics_rows(run_dir)
-    # The mean of the last five rows (the last 1,250 updates), not the last row alone: one row's
-    # rolling return swings by +-0.1 from one log interval to the next (0.73 once after rows of
-    # 0.82-0.93), so a single row tests the log's timing as much as what was learned.
-    final = sum(float(r["episode_return"]) for r in rows[-5:]) / 5
-    assert final >= 0.8, f"smoke preset ended at mean return {final:.2f} (last five rows)"
+    # Means of the last five rows (the last 1,250 updates): one row's rolling return swings by
+    # +-0.1 between log intervals. The learned policy is judged by the near-greedy environment
+    # (epsilon 0.0007; the other plays at 0.4): the all-env return mixes in the exploring env
+    # and once ended at 0.77 in CI while the near-greedy return sits at 0.93-0.99 in such runs.
+    # Untrained, both are 0.03-0.1.
+    greedy = sum(float(r["low_eps_return"]) for r in rows[-5:]) / 5
+    overall = sum(float(r["episode_return"]) for r in rows[-5:]) / 5
+    assert greedy >= 0.8, f"smoke preset's near-greedy env ended at return {greedy:.2f}"
+    assert overall >= 0.6, f"smoke preset ended at mean return {overall:.2f} over all envs"
 
 
 def test_cpu_preset_finds_rewards_on_two_room_within_its_prefill(tmp_path):
