@@ -298,10 +298,11 @@ def test_smoke_preset_learns_one_room(tmp_path):
     # Means of the last five rows (the last 1,250 updates): one row's rolling return swings by
     # +-0.1 between log intervals. The learned policy is judged by the near-greedy environment
     # (epsilon 0.0007; the other plays at 0.4): the all-env return mixes in the exploring env
-    # and once ended at 0.77 in CI while the near-greedy return sits at 0.93-0.99 in such runs.
-    # Untrained, both are 0.03-0.1.
-    greedy = sum(float(r["low_eps_return"]) for r in rows[-5:]) / 5
-    overall = sum(float(r["episode_return"]) for r in rows[-5:]) / 5
+    # and once ended at 0.77 in CI, while in a local rerun the near-greedy return sat at
+    # 0.93-0.99 over the last 4,000 updates. Untrained, both are 0.03-0.1.
+    def last_rows_mean(key):
+        return sum(float(r[key]) for r in rows[-5:]) / 5
+    greedy, overall = last_rows_mean("low_eps_return"), last_rows_mean("episode_return")
     assert greedy >= 0.8, f"smoke preset's near-greedy env ended at return {greedy:.2f}"
     assert overall >= 0.6, f"smoke preset ended at mean return {overall:.2f} over all envs"
 
