@@ -6,8 +6,10 @@ the evaluation actor, against network updates and against wall time;
 a curriculum run gets its phase (or room count) in a third panel. Needs matplotlib (the ``plot``
 extra). ``--milestones 0.5 0.9`` prints instead when each run's full-task rolling return first
 reached each level (updates and minutes), as a markdown table; ``--phases`` when each run
-entered each curriculum phase. Sweeps over many runs and seeds
-have their own plots: ``python -m experiments report``.
+entered each curriculum phase. ``--band`` treats the runs as seeds of one configuration and
+draws their full-task rolling return as a median with a min-max band (0 until a curriculum run
+reaches the full task). Sweeps over many runs and seeds have their own plots:
+``python -m experiments report``.
 """
 
 from __future__ import annotations
@@ -120,6 +122,70 @@ def _last(points: list[tuple]) -> str:
     return f"{points[-1][2]:.2f}" if points and not math.isnan(points[-1][2]) else "-"
 
 
+def band(curves: list[list[tuple[float, float]]], grid) -> tuple[list, list, list]:
+    """Min, median and max over runs of step curves [(x, value), ...] at each ``grid`` x.
+
+    A run's value at x is its last point at or before x, 0 before its first point (it had not
+    reached the full task) and absent after its last (it had stopped); x where no run has a
+    value gets NaN."""
+    import numpy as np
+
+    lo, mid, hi = [], [], []
+    for x in grid:
+        values = [next((v for px, v in reversed(c) if px <= x), 0.0) for c in curves
+                  if c and x <= c[-1][0]]
+        values = [v for v in values if not math.isnan(v)]
+        lo.append(min(values) if values else math.nan)
+        mid.append(float(np.median(values)) if values else math.nan)
+        hi.append(max(values) if values else math.nan)
+    return lo, mid, hi
+
+
+def plot_band(runs: dict, configs: dict, out: Path, levels=(0.5, 0.9)) -> Path:
+    """Seeds of one configuration: each run's full-task rolling return (thin), their median
+    and min-max band, against updates and minutes."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, axes = plt.subplots(1, 2, figsize=(10.4, 3.8), dpi=110)
+    for ax, index, xlabel in ((axes[0], 0, "network updates"), (axes[1], 1, "wall time (minutes)")):
+        curves = {}
+        for label, rows in runs.items():
+            ends = rows[-1]["update"] if index == 0 else rows[-1]["wall_time"] / 60
+            points = [(p[index], p[2]) for p in full_task_returns(rows, configs[label])]
+            start = [(0.0, 0.0), (points[0][0], 0.0)] if points else [(0.0, 0.0)]
+            curves[label] = start + points + [(ends, points[-1][1] if points else 0.0)]
+            ax.plot(*zip(*curves[label]), lw=0.8, alpha=0.6, label=label)
+        grid = np.linspace(0, max(c[-1][0] for c in curves.values()), 400)
+        lo, mid, hi = band(list(curves.values()), grid)
+        # grey band and black median so neither is mistaken for a seed's own colour
+        ax.fill_between(grid, lo, hi, color="grey", alpha=0.2, lw=0,
+                        label=f"min-max of {len(runs)} runs")
+        ax.plot(grid, mid, color="black", lw=2.0, label="median")
+        for level in levels:
+            ax.axhline(level, color="grey", lw=0.8, ls=":")
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("full-task rolling return")
+        ax.set_ylim(-0.03, 1.03)
+        ax.grid(alpha=0.3)
+    return _save(fig, axes[0], out, legend_size=7)
+
+
+def _save(fig, legend_axis, out: Path, legend_size: int) -> Path:
+    """Legend on ``legend_axis``, tight layout, write ``out`` (folders made) and close."""
+    import matplotlib.pyplot as plt
+
+    legend_axis.legend(fontsize=legend_size)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out)
+    plt.close(fig)
+    return out
+
+
 def plot_runs(runs: dict, out: Path) -> Path:
     """runs: label -> metrics rows. One figure, return panels side by side (+ phase panel)."""
     import matplotlib
@@ -156,12 +222,7 @@ def plot_runs(runs: dict, out: Path) -> Path:
         axes[2].yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
     for ax in axes:
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
-    fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out)
-    plt.close(fig)
-    return out
+    return _save(fig, axes[0], out, legend_size=8)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -174,11 +235,16 @@ def main(argv: list[str] | None = None) -> int:
                          "instead of plotting")
     ap.add_argument("--phases", action="store_true",
                     help="print when each run entered each curriculum phase instead of plotting")
+    ap.add_argument("--band", action="store_true",
+                    help="the runs are seeds of one configuration: plot their full-task "
+                         "rolling return as median and min-max band")
     args = ap.parse_args(argv)
     try:
         runs = {Path(d).name: load_run(Path(d)) for d in args.runs}
-        if args.milestones:
+        configs = {}
+        if args.milestones or args.band:
             configs = {Path(d).name: Config.from_json(Path(d) / "config.json") for d in args.runs}
+        if args.milestones:
             print(milestone_table(runs, configs, args.milestones))
             return 0
         if args.phases:
@@ -191,7 +257,8 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError:
         print("error: plotting needs matplotlib: pip install -e .[plot]", file=sys.stderr)
         return EXIT_BAD_INPUT
-    out = plot_runs(runs, Path(args.out) if args.out else Path(args.runs[0]) / "curves.png")
+    out = Path(args.out) if args.out else Path(args.runs[0]) / "curves.png"
+    out = plot_band(runs, configs, out) if args.band else plot_runs(runs, out)
     print(f"wrote {out}")
     return 0
 

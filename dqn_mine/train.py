@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from dqn_mine import checkpoint as ckpt
+from dqn_mine import machine
 from dqn_mine.checkpoint import CheckpointError
 from dqn_mine.config import Config, ConfigError, parse_args, resolve_device
 from dqn_mine.exitcodes import EXIT_BAD_INPUT, EXIT_INTERRUPTED
@@ -76,6 +77,7 @@ def open_run(cfg: Config) -> tuple[Config, Path, dict | None]:
                               "or another --run-dir")
         run_dir.mkdir(parents=True, exist_ok=True)
     cfg.to_json(run_dir / "config.json")  # on resume: with the flags that overrode it
+    machine.record(cfg, run_dir)          # one line per start: minutes differ by machine
     return cfg, run_dir, state
 
 

@@ -193,6 +193,16 @@ def test_fresh_network_policy_runs():
     assert r["boulder moved"] == 0.0 and r["room entered"] == 0.0   # one room, no boulders
 
 
+def test_bump_and_press_presses_at_obstacles_and_seldom_idles():
+    """The scripted yardstick takes the doorway's boulder in most episodes (it presses action 4
+    at every obstacle) and, unlike a fresh network, is seldom idle."""
+    r = measure(dict(task="two-room"), POLICIES["bump-and-press"], episodes=12, num_envs=4,
+                seed=0)
+    assert r["episodes"] == 12
+    assert r["boulder moved"] >= 0.25 and r["idle steps"] < 0.3
+    assert r["room entered"] <= r["boulder moved"] and r["delivered"] <= r["kit picked up"]
+
+
 # --- configuration -----------------------------------------------------------------------------
 
 @pytest.mark.parametrize("argv, match", [

@@ -95,3 +95,28 @@ def test_milestones_count_full_task_windows_only(tmp_path, capsys):
     assert main([str(run_dir), "--phases"]) == 0
     assert "| run | 100, 1.0 | 200, 2.0 |" in capsys.readouterr().out   # phase 2, then 1
     assert "| run | 400, 4.0 | 0.85 | - |" in out and "| low | 400, 4.0 | 0.85 | 0.34 |" in out
+
+
+def test_band_takes_each_runs_last_value_zero_before_its_start_and_none_after_its_end():
+    from dqn_mine.plot import band
+
+    a = [(10.0, 0.2), (20.0, 0.8)]             # reaches the full task at x = 10, stops at 20
+    b = [(0.0, 0.5), (30.0, 1.0)]
+    lo, mid, hi = band([a, b], [5.0, 15.0, 25.0, 40.0])
+    assert lo[:3] == [0.0, 0.2, 0.5] and hi[:3] == [0.5, 0.5, 0.5]
+    assert mid[:3] == [0.25, 0.35, 0.5]        # at 25 only b is still running
+    assert all(math.isnan(v[3]) for v in (lo, mid, hi))   # no run goes on to 40
+
+
+def test_band_plot_of_seeds_writes_a_png(tmp_path):
+    import json
+
+    runs = []
+    for seed, phases in enumerate(([3, 2, 1, 1, 1, 1, 1, 1], [2, 2, 2, 1, 1, 1, 1, 1])):
+        run = fake_run(tmp_path / f"seed{seed}", phases)
+        (run / "config.json").write_text(json.dumps({"curriculum": "adaptive",
+                                                     "curriculum_window": 1}))
+        runs.append(str(run))
+    assert main([*runs, "--band", "--out", str(tmp_path / "band.png")]) == 0
+    (w, h), ink = png_size(tmp_path / "band.png")
+    assert w > h and ink > 5

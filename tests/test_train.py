@@ -114,6 +114,10 @@ def test_serial_run_writes_the_run_folder(tmp_path):
     csv_rate = sorted(float(r["updates_per_s"]) for r in rows)[1]
     assert 0.5 * csv_rate < summary["updates_per_s"] < 2 * csv_rate
     assert summary["return_episodes"] == min(summary["episodes"], 100)
+    machine = [json.loads(line) for line in (run_dir / "machine.jsonl").read_text().splitlines()]
+    assert len(machine) == 1 and machine[0]["device"] == "cpu"
+    assert machine[0]["learner_precision"] in ("float32", "bfloat16")
+    assert machine[0]["gemm_float32_gflops_1_thread"] > 0
 
 
 def test_saved_replay_is_read_back_on_resume_without_a_prefill(tmp_path):
@@ -134,6 +138,7 @@ def test_saved_replay_is_read_back_on_resume_without_a_prefill(tmp_path):
     assert 0 < again["env_steps"] - first["env_steps"] < 400
     assert again["generation"] == 1 and again["updates"] == 60
     assert json.loads((run_dir / "config.json").read_text())["prefill"] == 200
+    assert len((run_dir / "machine.jsonl").read_text().splitlines()) == 2   # one per start
     # a replay of another size is refused in one line before anything starts
     res = run_train("--resume", str(run_dir), "--updates", "80", "--replay-capacity", "2048")
     assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
