@@ -47,6 +47,7 @@ clean:
 
 # -- experiments (experiments/grids/<GRID>.py; see `python -m experiments list`) ------------------
 # SCALE=paper (the study's settings) | quick (about an hour on 2 CPU cores) | smoke (minutes)
+# | cpu (the study's full-size task on 2 CPU cores, under 3 hours; exploration and scaling only)
 # | auto (the default: paper on a CUDA machine, else quick).
 # SEEDS=N runs seeds 0..N-1 (default: the grid's for the scale); JOBS=J runs at a time (never more
 # busy processes than cores). Re-running the same command skips finished runs and resumes

@@ -81,6 +81,8 @@ def make_env(args: argparse.Namespace):
         kwargs["num_rooms"] = args.num_rooms
     if args.phase is not None:
         kwargs["phase"] = args.phase
+    if args.boulder_phases:
+        kwargs["boulder_phases"] = True
     if args.max_steps is not None:
         kwargs["max_episode_steps"] = args.max_steps
     return MineRescueEnv(**kwargs)
@@ -136,6 +138,8 @@ def add_episode_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--placement", default=None, help="fixed or any-room (domain randomisation)")
     ap.add_argument("--phase", type=int, default=None,
                     help="curriculum phase: 1..6 of three-room and of two-room")
+    ap.add_argument("--boulder-phases", action="store_true",
+                    help="three-room: --phase counts the eleven boulder phases (as train's)")
     ap.add_argument("--visual-randomisation", action="store_true",
                     help="random light, wall colour and field of view")
     ap.add_argument("--seed", type=int, default=0, help="episode seed (the first one)")

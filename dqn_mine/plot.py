@@ -80,19 +80,31 @@ def milestone_table(runs: dict, configs: dict, levels) -> str:
     """Markdown: one row per run, updates and minutes to each level (- when never reached), the
     last full-task return, and (where logged) that of the envs at epsilon <= 0.01."""
     low_eps = any(has_values(rows, "low_eps_return") for rows in runs.values())
+    evaluated = any(has_values(rows, "eval_return") for rows in runs.values())
     head = " | ".join(f"return {lv:g}: updates, minutes" for lv in levels)
     extra = f" | last at epsilon <= {LOW_EPSILON:g}" if low_eps else ""
-    lines = [f"| run | {head} | last full-task return{extra} |",
-             "|---" * (len(levels) + 2 + low_eps) + "|"]
+    if evaluated:
+        extra += "".join(f" | evaluation {lv:g}: updates, minutes" for lv in levels)
+        extra += " | last evaluation"
+    columns = len(levels) * (1 + evaluated) + 2 + low_eps + evaluated
+    lines = [f"| run | {head} | last full-task return{extra} |", "|---" * columns + "|"]
     for label, rows in runs.items():
         points = full_task_returns(rows, configs[label])
-        reached = first_reached(points, levels)
-        cells = [f"{int(v[0]):,}, {v[1]:.1f}" if v else "-" for v in reached.values()]
-        cells.append(_last(points))
+        cells = _reached_cells(points, levels) + [_last(points)]
         if low_eps:
             cells.append(_last(full_task_returns(rows, configs[label], low_eps=True)))
+        if evaluated:
+            evals = [(r["update"], r["wall_time"] / 60, r["eval_return"]) for r in rows
+                     if not math.isnan(r.get("eval_return", math.nan))]
+            cells += _reached_cells(evals, levels) + [_last(evals)]
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def _reached_cells(points: list[tuple], levels) -> list[str]:
+    """"updates, minutes" of the first point at or above each level ("-" when never)."""
+    return [f"{int(v[0]):,}, {v[1]:.1f}" if v else "-"
+            for v in first_reached(points, levels).values()]
 
 
 def phase_starts(rows: list[dict]) -> dict:

@@ -80,7 +80,7 @@ def cmd_list() -> int:
     for name in grid_names():
         grid = load_grid(name)
         print(f"{name}: {grid.title}")
-        for scale in SCALES:
+        for scale in filter(grid.has_scale, SCALES):
             print(f"  {scale:<6} {grid.default_seeds(scale)} seed(s) x "
                   f"{', '.join(grid.config_names(scale))}")
     return 0

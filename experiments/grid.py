@@ -5,7 +5,8 @@ A grid file (``experiments/grids/<name>.py``) is data: module-level constants, n
 ``TITLE``      one line naming the experiment.
 ``CONFIGS``    ``{name: {Config field: value}}``, the configurations compared, in plot order.
 ``BASE``       overrides every configuration shares (optional).
-``SCALES``     ``{"paper" | "quick" | "smoke": {...}}`` with keys (all optional):
+``SCALES``     ``{"paper" | "quick" | "smoke" | "cpu": {...}}`` (cpu optional) with keys
+               (all optional):
                ``base`` overrides for every configuration at this scale, ``override``
                ``{name: {...}}`` per configuration, ``configs`` the names run at this scale
                (default all), ``seeds`` the default number of seeds, ``note`` a sentence for the
@@ -33,7 +34,11 @@ from typing import Any
 
 from dqn_mine.config import PRESETS, Config, ConfigError, to_argv
 
-SCALES = ("paper", "quick", "smoke")
+SCALES = ("paper", "quick", "smoke", "cpu")
+# Scales a grid may leave out (``paper`` falls back to the defaults; every grid has quick and
+# smoke): cpu runs the study's own tasks at full size within a few hours on 2 CPU cores, which
+# only some experiments can.
+OPTIONAL_SCALES = ("cpu",)
 OPS = (">", "<", "~")
 CLOSE = 0.1  # what "~" tolerates: the study's "the same" at returns in [0, 1]
 
@@ -91,7 +96,13 @@ class Grid:
     def scale(self, scale: str) -> dict[str, Any]:
         if scale not in SCALES:
             raise ConfigError(f"unknown scale {scale!r} (choose from {', '.join(SCALES)})")
+        if not self.has_scale(scale):
+            raise ConfigError(f"grid {self.name} has no {scale} scale (it has: "
+                              f"{', '.join(s for s in SCALES if self.has_scale(s))})")
         return self.scales.get(scale, {})
+
+    def has_scale(self, scale: str) -> bool:
+        return scale not in OPTIONAL_SCALES or scale in self.scales
 
     def config_names(self, scale: str) -> list[str]:
         return list(self.scale(scale).get("configs", self.configs))

@@ -16,3 +16,9 @@ SMOKE = {"preset": "smoke", "updates": 150, "prefill": 200, "replay_capacity": 4
 SMOKE_NOTE = "a pipeline check only (150 updates on a tiny mine): no learning is expected"
 
 PAPER_NOTE = "the study's configuration"
+
+# The study's own tasks at full size on 2 CPU cores: the cpu preset's actors, replay and learner
+# (see dqn_mine/config.py), each run bounded by wall time so that a grid of three or four
+# configurations ends within 3 hours whatever the machine's speed.
+CPU = {"preset": "cpu", "updates": 10_000_000, "eval_every": 500_000, "eval_episodes": 10}
+CPU_MINUTES = 55

@@ -118,10 +118,13 @@ BAD = [
     (["--curriculum-steps", "300"], "adaptive only"),
     (["--task", "rooms", "--num-rooms", "1"], "--num-rooms"),
     (["--curriculum", "adaptive", "--task", "one-room"], "three-room"),
+    (["--boulder-phases", "--task", "two-room", "--curriculum", "adaptive"], "three-room"),
+    (["--boulder-phases", "--task", "three-room"], "--boulder-phases"),
     (["--curriculum", "schedule", "--task", "rooms", "--rooms-schedule", "1", "3"],
      "--rooms-schedule"),
     (["--eval-task", "cave"], "--eval-task"),
     (["--prefill", "-1"], "--prefill"),
+    (["--minutes", "0"], "--minutes"),
     (["--bogus", "1"], "unrecognized"),
     (["--resume", "/nonexistent/run"], "--resume"),
 ]

@@ -52,6 +52,16 @@ def test_adaptive_curriculum_starts_easiest_and_advances_one_phase_per_full_wind
     assert cur.phase == 5 and cur.phase_return == 0.5
 
 
+def test_three_room_preset_starts_at_the_eleventh_boulder_phase_and_its_envs_know_them():
+    cfg = parse_args(["--preset", "cpu-three-room"])
+    assert (cfg.task, cfg.boulder_phases, cfg.curriculum) == ("three-room", True, "adaptive")
+    assert Curriculum(cfg).phase == 11
+    assert actor_specs(cfg)[0].env_kwargs["boulder_phases"] is True
+    assert eval_env_kwargs(cfg)["boulder_phases"] is True    # harmless: it plays phase 1
+    other = parse_args(["--preset", "cpu-three-room", "--eval-task", "two-room"])
+    assert "boulder_phases" not in eval_env_kwargs(other)
+
+
 def test_low_epsilon_return_counts_only_the_near_greedy_episodes_of_the_phase():
     cfg = parse_args(["--curriculum", "adaptive", "--curriculum-window", "4",
                       "--curriculum-threshold", "0.4"])             # two-room: starts at 6

@@ -9,7 +9,7 @@ import pytest
 
 from dqn_mine.env import MineRescueEnv
 from dqn_mine.env.entities import BOULDER
-from dqn_mine.env.tasks import PHASES, TASK_PHASES, TWO_ROOM_PHASES
+from dqn_mine.env.tasks import PHASES, THREE_ROOM_BOULDER_PHASES, TWO_ROOM_PHASES, phase_table
 
 SOLVE_CONFIGS = [
     dict(task="one-room"),
@@ -71,16 +71,18 @@ def test_expert_solves_nearly_all_of_100_episodes(config):
     assert rate >= 0.97, f"expert solved only {rate:.0%}"
 
 
-# (task, phase, kit room, miner room) for every curriculum phase
-PHASE_CASES = [("three-room", p, 2, 0) for p in sorted(PHASES)] + \
-    [("two-room", p, 1, 1) for p in sorted(TWO_ROOM_PHASES)]
+# (task, boulder phases, phase, kit room, miner room) for every curriculum phase
+PHASE_CASES = [("three-room", False, p, 2, 0) for p in sorted(PHASES)] + \
+    [("three-room", True, p, 2, 0) for p in sorted(THREE_ROOM_BOULDER_PHASES)] + \
+    [("two-room", False, p, 1, 1) for p in sorted(TWO_ROOM_PHASES)]
+PHASE_TABLES = [("two-room", False), ("three-room", False), ("three-room", True)]
 
 
-@pytest.mark.parametrize("task, phase, kit_room, miner_room", PHASE_CASES,
-                         ids=[f"{t}-{p}" for t, p, _, _ in PHASE_CASES])
-def test_phase_starts_as_specified(task, phase, kit_room, miner_room):
-    env = MineRescueEnv(task=task, phase=phase)
-    want = TASK_PHASES[task][phase]
+@pytest.mark.parametrize("task, boulder, phase, kit_room, miner_room", PHASE_CASES,
+                         ids=[f"{t}{'-boulder' * b}-{p}" for t, b, p, _, _ in PHASE_CASES])
+def test_phase_starts_as_specified(task, boulder, phase, kit_room, miner_room):
+    env = MineRescueEnv(task=task, phase=phase, boulder_phases=boulder)
+    want = phase_table(task, boulder)[phase]
     for seed in range(5):
         _, info = env.reset(seed=seed)
         doors = len(env.layout.doors)
@@ -98,16 +100,19 @@ def test_phase_starts_as_specified(task, phase, kit_room, miner_room):
         if want.near_boulder:   # a few steps from the boulder that blocks the next doorway
             boulder = [e for e in env.world_entities() if e.kind == BOULDER][cleared]
             assert 2.0 <= math.dist((env.agent_x, env.agent_z), (boulder.x, boulder.z)) <= 4.0
+        if want.near_kit:
+            assert 2.0 <= math.dist((env.agent_x, env.agent_z), (env.kit.x, env.kit.z)) <= 4.0
     env.close()
 
 
-@pytest.mark.parametrize("task", sorted(TASK_PHASES))
-def test_harder_phases_need_more_expert_steps(task):
+@pytest.mark.parametrize("task, boulder", PHASE_TABLES,
+                         ids=[f"{t}{'-boulder' * b}" for t, b in PHASE_TABLES])
+def test_harder_phases_need_more_expert_steps(task, boulder):
     """The easiest phase (carrying the kit next to the miner) is first, phase 1 the full task."""
     means = {}
-    phases = TASK_PHASES[task]
+    phases = phase_table(task, boulder)
     for phase in sorted(phases):
-        env = MineRescueEnv(task=task, phase=phase)
+        env = MineRescueEnv(task=task, phase=phase, boulder_phases=boulder)
         means[phase] = statistics.mean(expert_episode(env, s)[1] for s in range(8))
         env.close()
     order = [means[p] for p in sorted(phases, reverse=True)]   # easiest first

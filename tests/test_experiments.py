@@ -49,6 +49,10 @@ def test_grid_expands_to_valid_runs(name, scale, tmp_path):
     from dqn_mine.train import check_env_settings
 
     grid = load_grid(name)
+    if not grid.has_scale(scale):
+        with pytest.raises(ConfigError, match=f"no {scale} scale"):
+            grid.expand(scale, tmp_path)
+        return
     runs = grid.expand(scale, tmp_path, seeds=[0, 3])
     assert len(runs) == 2 * len(grid.config_names(scale))
     assert len({r.run_dir for r in runs}) == len(runs)

@@ -92,9 +92,21 @@ def test_milestones_count_full_task_windows_only(tmp_path, capsys):
     assert main([str(run_dir), str(with_low), "--milestones", "0.5"]) == 0
     out = capsys.readouterr().out
     assert "| last full-task return | last at epsilon <= 0.01 |" in out
+    assert "| run | 400, 4.0 | 0.85 | - |" in out and "| low | 400, 4.0 | 0.85 | 0.34 |" in out
+    # a run with an evaluation actor: when its return first reached each level, and its last
+    evaluated = tmp_path / "eval"
+    evaluated.mkdir()
+    metrics = MetricsTable(evaluated / "metrics.csv")
+    for i, row in enumerate(rows):
+        metrics.write({**row, "eval_return": [math.nan, 0.2, 0.6, math.nan, 0.4, 0.9, 0.8][i]})
+    metrics.close()
+    (evaluated / "config.json").write_text((run_dir / "config.json").read_text())
+    assert main([str(evaluated), "--milestones", "0.5", "0.9"]) == 0
+    out = capsys.readouterr().out
+    assert "| evaluation 0.5: updates, minutes | evaluation 0.9: updates, minutes |" in out
+    assert "| eval | 400, 4.0 | 600, 6.0 | 0.85 | 300, 3.0 | 600, 6.0 | 0.80 |" in out
     assert main([str(run_dir), "--phases"]) == 0
     assert "| run | 100, 1.0 | 200, 2.0 |" in capsys.readouterr().out   # phase 2, then 1
-    assert "| run | 400, 4.0 | 0.85 | - |" in out and "| low | 400, 4.0 | 0.85 | 0.34 |" in out
 
 
 def test_band_takes_each_runs_last_value_zero_before_its_start_and_none_after_its_end():

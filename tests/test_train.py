@@ -120,6 +120,17 @@ def test_serial_run_writes_the_run_folder(tmp_path):
     assert machine[0]["gemm_float32_gflops_1_thread"] > 0
 
 
+def test_minutes_end_a_run_as_finished_with_a_checkpoint(tmp_path):
+    run_dir = tmp_path / "timed"
+    res = run_train(*TINY, "--serial", "--updates", "1000000", "--minutes", "0.25",
+                    "--run-dir", str(run_dir))
+    assert res.returncode == 0, res.stderr[-3000:]
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["reason"] == "finished (time budget of 0.25 min)"
+    assert 0 < summary["updates"] < 1_000_000 and 15 <= summary["wall_time"] < 60
+    assert (run_dir / "checkpoint.pt").exists()
+
+
 def test_saved_replay_is_read_back_on_resume_without_a_prefill(tmp_path):
     from dqn_mine import checkpoint as ckpt
 

@@ -26,6 +26,12 @@ has phases 1-6 built the same way (see ``TWO_ROOM_PHASES`` and below):
 ``two-room``: 1 the full task; 2 the agent 2-4 units from the boulder in the doorway; 3 the agent
 in room 0 holding that boulder; 4 the doorway cleared; 5 the agent in room 1 (the one-room problem
 there); 6 the agent in room 1 carrying the kit.
+
+``three-room`` with ``boulder_phases=True`` (eleven phases, the study's six renumbered 11, 10, 9,
+7, 4, 1): 1 the full task; 2 the agent in room 0, 2-4 units from the boulder of doorway 0-1; 3 in
+room 0 holding that boulder; 4 the study's phase 2; 5 in room 1, 2-4 units from the boulder of
+doorway 1-2 (doorway 0-1 cleared); 6 in room 1 holding that boulder; 7 the study's phase 3; 8 in
+room 2, 2-4 units from the kit (both doorways cleared); 9-11 the study's phases 4-6.
 """
 
 from __future__ import annotations
@@ -51,6 +57,7 @@ class Phase:
     carrying_kit: bool
     holding_boulder: bool = False   # the next blocked doorway's boulder is in the agent's hand
     near_boulder: bool = False      # the agent starts a few steps from the next blocked doorway
+    near_kit: bool = False          # the agent starts a few steps from the kit
 
 
 PHASES = {
@@ -75,8 +82,42 @@ TWO_ROOM_PHASES = {
     5: Phase(1, 1, False),
     6: Phase(1, 1, True),
 }
-NEAR_BOULDER = (2.0, 4.0)   # distance of the agent from the blocked doorway's centre (phase 2)
+# three-room with ``boulder_phases=True``: the study's six phases (here 11, 10, 9, 7, 4, 1) with
+# two-room's two boulder steps inserted before each phase that must clear a doorway (a start a
+# few steps from the next blocked doorway, and one with its boulder already in hand), and a start
+# a few steps from the kit before the first phase that must take it: without it (ten phases, one
+# run) the agent that had only ever started with the kit in hand left room 2 without it in most
+# episodes of the study's phase 3, and that phase sat at a return of 0.2-0.5 for 23 minutes.
+THREE_ROOM_BOULDER_PHASES = {
+    1: Phase(0, 0, False),
+    2: Phase(0, 0, False, near_boulder=True),
+    3: Phase(0, 0, False, holding_boulder=True),
+    4: Phase(1, 1, False),
+    5: Phase(1, 1, False, near_boulder=True),
+    6: Phase(1, 1, False, holding_boulder=True),
+    7: Phase(2, 2, False),
+    8: Phase(2, 2, False, near_kit=True),
+    9: Phase(2, 2, True),
+    10: Phase(1, 2, True),
+    11: Phase(0, 2, True),
+}
+NEAR_BOULDER = (2.0, 4.0)   # distance of the agent from the boulder (or kit) it starts near
 TASK_PHASES = {"two-room": TWO_ROOM_PHASES, "three-room": PHASES}
+BOULDER_PHASES = {"three-room": THREE_ROOM_BOULDER_PHASES}
+
+
+def phase_table(task: str, boulder_phases: bool = False) -> dict[int, Phase]:
+    """The curriculum phases of ``task`` (1 = the full task); ``boulder_phases`` picks the
+    finer table of a task that has one (three-room)."""
+    if task not in TASK_PHASES:
+        raise ValueError(f"curriculum phases exist only for tasks 'two-room' and 'three-room', "
+                         f"not {task!r}")
+    if boulder_phases:
+        if task not in BOULDER_PHASES:
+            raise ValueError(f"boulder_phases applies to {', '.join(BOULDER_PHASES)} only "
+                             f"({task!r} has its boulder phases already)")
+        return BOULDER_PHASES[task]
+    return TASK_PHASES[task]
 
 
 def _one_room(env: MineRescueEnv) -> None:
@@ -100,20 +141,22 @@ def _populate(env: MineRescueEnv, boulders, kit_room: int, miner_room: int) -> N
     """Place miner, kit and agent: the full task (agent in room 0), or a curriculum phase."""
     if env.phase is None or env.phase == 1:
         agent, kit, miner = env.start_rooms(fixed=(0, kit_room, miner_room))
-        carrying, near = False, None
+        carrying, near, near_kit = False, None, False
     else:
-        phase = TASK_PHASES[env.task][env.phase]
+        phase = phase_table(env.task, env.boulder_phases)[env.phase]
         agent, kit, miner, carrying = phase.agent_room, kit_room, miner_room, phase.carrying_kit
         for boulder, door in list(zip(boulders, env.layout.doors))[:phase.boulders_aside]:
             env.move_aside(boulder, door)
         if phase.holding_boulder:
             env.carrying = boulders[phase.boulders_aside]
         near = boulders[phase.boulders_aside] if phase.near_boulder else None
+        near_kit = phase.near_kit
     env.place(MINER, miner)
     if carrying:
         env.carrying = env.add(Entity(KIT))
     else:
-        env.place(KIT, kit)
+        placed = env.place(KIT, kit)
+        near = placed if near_kit else near
     if near is not None:
         env.place_agent_near(agent, near, *NEAR_BOULDER)
     else:
@@ -167,6 +210,9 @@ class MineRescueEnv(MineEnv):
         placement: "fixed" or "any-room" (domain randomisation of the start rooms).
         phase: curriculum phase 1..6 of ``three-room`` or 1..6 of ``two-room`` (1 = the full
             task), or None.
+        boulder_phases: ``three-room`` only: phases 1..11, the six with a start near each
+            blocked doorway, one holding its boulder and one near the kit inserted (see
+            ``phase_table``).
         render_mode: None or "rgb_array" (first-person view and map side by side).
         randomise_visuals: draw the light level, the wall colour and the field of view anew each
             episode (visual domain randomisation; the layout of a seed does not change).
@@ -175,7 +221,8 @@ class MineRescueEnv(MineEnv):
     def __init__(self, task: str = "two-room", num_rooms: int | None = None,
                  room_size: float = 16.0, max_episode_steps: int | None = None,
                  placement: str = "fixed", phase: int | None = None,
-                 render_mode: str | None = None, randomise_visuals: bool = False):
+                 render_mode: str | None = None, randomise_visuals: bool = False,
+                 boulder_phases: bool = False):
         if task not in TASKS:
             raise ValueError(f"unknown task {task!r}; choose one of {', '.join(TASKS)}")
         spec = TASKS[task]
@@ -195,7 +242,10 @@ class MineRescueEnv(MineEnv):
         if placement not in PLACEMENTS:
             raise ValueError(f"placement must be one of {', '.join(PLACEMENTS)}, got {placement!r}")
         self.placement = placement
-        self.phase = _check_phase(task, placement, phase)
+        if boulder_phases:
+            phase_table(task, True)   # raises for a task without them
+        self.boulder_phases = bool(boulder_phases)
+        self.phase = _check_phase(task, placement, phase, self.boulder_phases)
         super().__init__(max_episode_steps, room_size, render_mode, randomise_visuals)
 
     def _generate(self) -> None:
@@ -226,13 +276,10 @@ def _check_rooms(spec: Task, num_rooms) -> int:
     return int(num_rooms)
 
 
-def _check_phase(task: str, placement: str, phase) -> int | None:
+def _check_phase(task: str, placement: str, phase, boulder_phases: bool) -> int | None:
     if phase is None:
         return None
-    if task not in TASK_PHASES:
-        raise ValueError(f"curriculum phases exist only for tasks 'two-room' and 'three-room', "
-                         f"not {task!r}")
-    phases = TASK_PHASES[task]
+    phases = phase_table(task, boulder_phases)
     if not _is_int(phase) or phase not in phases:
         raise ValueError(f"phase must be an integer in 1..{len(phases)} or None for {task!r}, "
                          f"got {phase!r}")

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from dqn_mine.config import Config
-from dqn_mine.env.tasks import TASK_PHASES, TASKS
+from dqn_mine.env.tasks import TASKS, phase_table
 from dqn_mine.metrics import LOW_EPSILON, Rolling
 
 
@@ -34,7 +34,8 @@ class Curriculum:
         self.review_pick = cfg.curriculum_review_pick
         self.rooms_schedule = tuple(cfg.rooms_schedule)
         self.total_updates = cfg.updates
-        self.easiest = max(TASK_PHASES[cfg.task]) if self.kind == "adaptive" else 0
+        self.easiest = (max(phase_table(cfg.task, cfg.boulder_phases))
+                        if self.kind == "adaptive" else 0)
         # adaptive: the current phase (1 = the full task); 0 without the adaptive curriculum
         self.phase = self.easiest if phase is None or self.kind != "adaptive" else int(phase)
         # schedule: the current room count; None without the schedule

@@ -229,6 +229,14 @@ class Run:
         self.drain_episodes()
         self.train_start_steps = self.actor_steps()
 
+    def out_of_time(self) -> bool:
+        """Whether the run's wall-time budget (``--minutes``) is spent; the run then finishes
+        as if its updates were done."""
+        if self.cfg.minutes is None or self.wall_time() < 60 * self.cfg.minutes:
+            return False
+        self.reason = f"finished (time budget of {self.cfg.minutes:g} min)"
+        return True
+
     def learner_may_update(self) -> bool:
         """Under a fixed replay ratio the learner waits for enough new transitions."""
         return learner_may_update(self.cfg, self.ctx.learner.new_updates, self.actor_steps())
@@ -239,7 +247,8 @@ class Run:
         bar = self._bar(total=cfg.updates, initial=learner.updates, desc="train", unit="upd")
         rates = RateMeter(learner.updates), RateMeter(self.actor_steps())
         agg = {key: [] for key in UPDATE_STATS}
-        while learner.updates < cfg.updates and not self._should_stop():
+        while learner.updates < cfg.updates and not self._should_stop() \
+                and not self.out_of_time():
             self.ctx.actors.advance()
             if not self.learner_may_update():
                 if not self.serial:

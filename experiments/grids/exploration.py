@@ -1,7 +1,7 @@
 """Exploration: plain epsilon-greedy vs adaptive curriculum vs any-room placement on
 three-room, compared through the evaluation actor on the full task."""
 
-from experiments.scales import PAPER_NOTE, QUICK, SMOKE, SMOKE_NOTE
+from experiments.scales import CPU, CPU_MINUTES, PAPER_NOTE, QUICK, SMOKE, SMOKE_NOTE
 
 TITLE = "Exploration: baseline vs curriculum (phases) vs domain randomisation (three-room)"
 CONFIGS = {
@@ -18,6 +18,15 @@ SCALES = {
               "note": "reduced for 2 CPU cores: three-room of 8x8 rooms, 400-step episodes, "
                       "12,000 updates, 1 actor and the evaluation actor, one seed; the full "
                       "task is far out of reach at this budget, watch the curriculum phase"},
+    # The cpu preset's exploration on the full three-room; only the curriculum uses phases
+    # (its eleven boulder phases, as the cpu-three-room preset).
+    "cpu": {"base": {**CPU, "task": "three-room", "minutes": CPU_MINUTES},
+            "override": {"baseline": {"curriculum": "none"},
+                         "curriculum": {"boulder_phases": True},
+                         "any-room": {"curriculum": "none"}},
+            "seeds": 1,
+            "note": f"full-size three-room (16 x 16 rooms, 2,000 steps) on 2 CPU cores: the cpu "
+                    f"preset's actors and learner, {CPU_MINUTES} minutes a run, one seed"},
     "smoke": {"base": {**SMOKE, "task": "three-room", "eval_every": 500, "eval_episodes": 1},
               "seeds": 1, "note": SMOKE_NOTE},
 }
