@@ -33,6 +33,7 @@ INIT_PRIORITIES = ("actor", "max")
 CURRICULA = ("none", "adaptive", "schedule")
 EXPLORATIONS = ("epsilon", "ez")
 REVIEW_PICKS = ("uniform", "nearest")
+REVIEW_UNITS = ("episodes", "steps")
 
 
 DIFFERENCES_KEY = "differs_from_preset"   # in config.json: what the flags changed
@@ -73,13 +74,22 @@ class Config:
                                      "in: uniform, or nearest (the phase k steps easier with "
                                      "weight 2**-k: most often the one just passed)",
                                      REVIEW_PICKS)
+    curriculum_review_unit: str = _f("episodes", "what --curriculum-review is a share of: "
+                                     "episodes (a random draw per episode), or steps (an actor "
+                                     "reviews while its review episodes played fewer than that "
+                                     "share of the steps since the last phase switch)",
+                                     REVIEW_UNITS)
     curriculum_steps: Optional[int] = _f(None, "adaptive curriculum: step limit of episodes that "
                                          "start in a phase easier than the full task (none = "
                                          "the task's limit)")
-    boulder_phases: bool = _f(False, "three-room adaptive curriculum: 11 phases, a start near "
-                              "each blocked doorway and one holding its boulder inserted before "
-                              "each phase that must clear it, and one near the kit (two-room's "
-                              "phases have them)")
+    curriculum_dr: float = _f(0.0, "adaptive curriculum with domain randomisation: share of "
+                              "episodes that start as the full task with --placement any-room's "
+                              "random rooms instead of in a phase (they do not count towards "
+                              "the phase's switch)")
+    boulder_phases: bool = _f(False, "three-room adaptive curriculum: 13 phases, a start near "
+                              "each blocked doorway, one holding its boulder and one with it "
+                              "cleared inserted before each phase that must clear it, and one "
+                              "near the kit (two-room's phases have them)")
     rooms_schedule: tuple[int, ...] = _f((3, 4, 5), "room counts of the schedule curriculum, each "
                                          "for an equal share of the updates")
     # -- actors ------------------------------------------------------------------------------
@@ -144,6 +154,8 @@ class Config:
     eval_episodes: int = _f(10, "episodes per evaluation")
     eval_task: Optional[str] = _f(None, "task of the evaluation actor (none = --task, full "
                                   "problem)")
+    eval_num_rooms: Optional[int] = _f(None, "rooms of the evaluation actor's rooms task (none "
+                                       "= --num-rooms, or the schedule's last count)")
     eval_epsilon: float = _f(0.01, "exploration rate of the evaluation actor")
     eval_unstick: bool = _f(False, "the evaluation actor also takes a random action after a "
                             "step that left the frame unchanged (as --unstick)")
@@ -292,12 +304,15 @@ PRESETS: dict[str, dict[str, Any]] = {
     },
 }
 # The full three-room task (2,000 steps) on a few-core CPU machine: the cpu preset's settings,
-# with the adaptive curriculum over the eleven boulder phases (the study's six phases leave two
-# steps where a doorway must be cleared without ever having walked up to a blocked one, which on
-# two-room was the wall until such phases existed, and one where the kit must be taken after
-# only ever starting with it in hand; see dqn_mine/env/tasks.py) and an update budget for 90
-# minutes at ~100 updates/s.
+# with the adaptive curriculum over the thirteen boulder phases (the study's six phases leave
+# steps where a doorway must be cleared without ever having walked up to a blocked one or
+# through a cleared one, which on two-room was the wall until such phases existed, and one where
+# the kit must be taken after only ever starting with it in hand; see dqn_mine/env/tasks.py), half
+# of the steps reviewing passed phases (with 30% of the episodes, ~4% of the steps, the skills
+# of passed phases decayed within 15 minutes of a stalled phase; docs/three_room.md) and an
+# update budget for 90 minutes at ~100 updates/s.
 PRESETS["cpu-three-room"] = {**PRESETS["cpu"], "task": "three-room", "boulder_phases": True,
+                             "curriculum_review": 0.5, "curriculum_review_unit": "steps",
                              "updates": 600_000}
 
 
@@ -318,13 +333,17 @@ def _choice_problems(c: Config) -> list[str]:
         p.append("--tensorboard needs the tensorboard package (pip install -e .[tb])")
     for name in ("task", "placement", "curriculum", "epsilon_schedule", "init_priority",
                  "device", "actor_precision", "learner_precision", "exploration",
-                 "curriculum_review_pick"):
+                 "curriculum_review_pick", "curriculum_review_unit"):
         choices = _field(name).metadata["choices"]
         if getattr(c, name) not in choices:
             p.append(f"--{_flag(name)}: unknown value {getattr(c, name)!r} "
                      f"(choose from {', '.join(choices)})")
     if c.eval_task is not None and c.eval_task not in TASKS:
         p.append(f"--eval-task: unknown task {c.eval_task!r} (choose from {', '.join(TASKS)})")
+    if c.eval_num_rooms is not None and (c.eval_task or c.task) != "rooms":
+        p.append("--eval-num-rooms applies to an evaluation actor on the rooms task only")
+    elif c.eval_num_rooms is not None and not 2 <= c.eval_num_rooms <= MAX_ROOMS:
+        p.append(f"--eval-num-rooms must be in 2..{MAX_ROOMS}, got {c.eval_num_rooms}")
     if c.preset not in PRESETS:
         p.append(f"--preset: unknown preset {c.preset!r} (choose from {', '.join(PRESETS)})")
     return p
@@ -403,6 +422,11 @@ def _task_problems(c: Config) -> list[str]:
         p.append(f"--max-episode-steps must be at least 1, got {c.max_episode_steps}")
     if c.curriculum_steps is not None and c.curriculum_steps < 1:
         p.append(f"--curriculum-steps must be at least 1, got {c.curriculum_steps}")
+    if not 0.0 <= c.curriculum_dr < 1.0:
+        p.append(f"--curriculum-dr must be in [0, 1), got {c.curriculum_dr}")
+    if c.curriculum_dr and c.curriculum != "adaptive":
+        p.append("--curriculum-dr applies to --curriculum adaptive only (for domain "
+                 "randomisation alone use --placement any-room)")
     if c.curriculum_steps is not None and c.curriculum != "adaptive":
         p.append("--curriculum-steps applies to --curriculum adaptive only")
     if c.task == "rooms" and not 2 <= c.num_rooms <= MAX_ROOMS:

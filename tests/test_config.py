@@ -125,6 +125,11 @@ BAD = [
     (["--eval-task", "cave"], "--eval-task"),
     (["--prefill", "-1"], "--prefill"),
     (["--minutes", "0"], "--minutes"),
+    (["--task", "three-room", "--curriculum-dr", "0.5"], "--curriculum-dr"),
+    (["--preset", "cpu-three-room", "--curriculum-dr", "1.0"], "--curriculum-dr"),
+    (["--curriculum-review-unit", "transitions"], "--curriculum-review-unit"),
+    (["--task", "two-room", "--eval-num-rooms", "5"], "--eval-num-rooms"),
+    (["--task", "rooms", "--eval-num-rooms", "13"], "--eval-num-rooms"),
     (["--bogus", "1"], "unrecognized"),
     (["--resume", "/nonexistent/run"], "--resume"),
 ]

@@ -52,10 +52,11 @@ def test_adaptive_curriculum_starts_easiest_and_advances_one_phase_per_full_wind
     assert cur.phase == 5 and cur.phase_return == 0.5
 
 
-def test_three_room_preset_starts_at_the_eleventh_boulder_phase_and_its_envs_know_them():
+def test_three_room_preset_starts_at_the_thirteenth_boulder_phase_and_its_envs_know_them():
     cfg = parse_args(["--preset", "cpu-three-room"])
     assert (cfg.task, cfg.boulder_phases, cfg.curriculum) == ("three-room", True, "adaptive")
-    assert Curriculum(cfg).phase == 11
+    assert (cfg.curriculum_review, cfg.curriculum_review_unit) == (0.5, "steps")
+    assert Curriculum(cfg).phase == 13
     assert actor_specs(cfg)[0].env_kwargs["boulder_phases"] is True
     assert eval_env_kwargs(cfg)["boulder_phases"] is True    # harmless: it plays phase 1
     other = parse_args(["--preset", "cpu-three-room", "--eval-task", "two-room"])
@@ -163,6 +164,56 @@ def test_review_starts_a_share_of_episodes_in_easier_phases():
     assert rng.bit_generator.state == state, "without review no random number is drawn"
 
 
+def _review_share(unit: str, current_steps: int, review_steps: int) -> tuple[float, float]:
+    """One actor's episodes in phase 2 of two-room with half of them (or half of the steps)
+    reviewing: current-phase episodes fail at ``current_steps``, reviewed ones succeed in
+    ``review_steps``. Returns (share of episodes, share of steps) that reviewed."""
+    import numpy as np
+
+    cfg = parse_args(["--curriculum", "adaptive", "--curriculum-review", "0.5",
+                      "--curriculum-review-unit", unit])
+    cur, rng = Curriculum(cfg), np.random.default_rng(0)
+    episodes, steps = [], []
+    for _ in range(2_000):
+        phase, settings = cur.episode_start(2, 0, rng)
+        assert settings["phase"] == phase
+        length = review_steps if phase > 2 else current_steps
+        cur.played(phase, length)
+        episodes.append(phase > 2)
+        steps.append(length * (phase > 2))
+    return float(np.mean(episodes)), sum(steps) / (cur.played_steps or 1)
+
+
+def test_review_by_steps_gives_passed_phases_that_share_of_the_steps():
+    """A new phase's failures run to the step limit, a passed phase's successes are short: by
+    episodes half the episodes are only ~9% of the steps; by steps, half the steps."""
+    by_episodes = _review_share("episodes", current_steps=1000, review_steps=100)
+    assert abs(by_episodes[0] - 0.5) < 0.04 and abs(by_episodes[1] - 100 / 1100) < 0.02
+    by_steps = _review_share("steps", current_steps=1000, review_steps=100)
+    assert abs(by_steps[1] - 0.5) < 0.01 and by_steps[0] > 0.85
+    # equal lengths: both units agree
+    assert abs(_review_share("steps", 300, 300)[0] - 0.5) < 0.01
+
+
+def test_review_by_steps_counts_from_the_last_phase_switch():
+    import numpy as np
+
+    cfg = parse_args(["--curriculum", "adaptive", "--curriculum-review", "0.5",
+                      "--curriculum-review-unit", "steps"])
+    cur, rng = Curriculum(cfg), np.random.default_rng(0)
+    state = rng.bit_generator.state
+    assert cur.episode_start(6, 0, rng)[0] == 6      # the easiest phase: nothing to review
+    cur.played(6, 5_000)
+    assert cur.episode_start(5, 0, rng)[0] == 5, "the switch starts a new count"
+    assert (cur.played_steps, cur.review_steps) == (0, 0)
+    cur.played(6, 200)      # an episode started before the switch: review for phase 5
+    cur.played(5, 300)
+    assert cur.episode_start(5, 0, rng)[0] == 6      # 200 < 0.5 * 500: review
+    cur.played(6, 100)
+    assert cur.episode_start(5, 0, rng)[0] == 5      # 300 = 0.5 * 600: not below, no review
+    assert rng.bit_generator.state == state, "the decision draws no random number"
+
+
 def test_phase_holds_when_returns_stay_below_threshold(tmp_path):
     rows = run("--task", "three-room", "--curriculum", "adaptive", "--curriculum-window", "2",
                "--curriculum-threshold", "1.0", "--updates", "40",
@@ -212,6 +263,11 @@ def test_evaluation_actor_runs_the_full_target_task():
     rooms = parse_args(["--task", "rooms", "--curriculum", "schedule", "--rooms-schedule", "3", "4",
                         "5", "--eval-every", "1000"])
     assert eval_env_kwargs(rooms)["num_rooms"] == 5 and Curriculum(rooms).num_rooms == 3
+    three = parse_args(["--task", "rooms", "--num-rooms", "3", "--placement", "any-room",
+                        "--eval-num-rooms", "5", "--eval-every", "1000"])
+    assert actor_specs(three)[0].env_kwargs["num_rooms"] == 3
+    assert eval_env_kwargs(three)["num_rooms"] == 5 and eval_env_kwargs(three)["placement"] == \
+        "fixed"
 
 
 @pytest.mark.parametrize("value", [math.nan])
@@ -240,3 +296,35 @@ def test_nearest_review_favours_the_phase_just_passed():
     assert {curriculum.review_phase(6, rng) for _ in range(50)} == {6}
     # one phase passed: review always draws it
     assert set(curriculum.review_phase(5, rng) for _ in range(200)) == {5, 6}
+
+
+def test_curriculum_dr_starts_a_share_of_episodes_as_the_randomised_full_task():
+    import numpy as np
+
+    from dqn_mine.env import MineRescueEnv
+    from dqn_mine.system.curriculum import DR_PHASE
+
+    cfg = parse_args(["--preset", "cpu-three-room", "--curriculum-dr", "0.3"])
+    cur, rng = Curriculum(cfg), np.random.default_rng(0)
+    starts = [cur.episode_start(9, 0, rng) for _ in range(4_000)]
+    dr = [settings for phase, settings in starts if phase == DR_PHASE]
+    assert abs(len(dr) / len(starts) - 0.3) < 0.025
+    assert all(s == {"phase": None, "placement": "any-room"} for s in dr)
+    assert all(s["placement"] == "fixed" and s["phase"] >= 9 for p, s in starts if p != DR_PHASE)
+    cur.played(DR_PHASE, 2_000)     # outside the review count
+    assert cur.played_steps == 0
+    # an actor's env built for the fixed task takes both kinds of start, episode by episode
+    env = MineRescueEnv(task="three-room", boulder_phases=True)
+    rooms = set()
+    for seed, (phase, settings) in enumerate(starts[:40]):
+        for name, value in settings.items():
+            setattr(env, name, value)
+        _, info = env.reset(seed=seed)
+        if phase == DR_PHASE:
+            rooms.add((info["agent_room"], info["kit_room"], info["miner_room"]))
+            assert not info["carrying"]
+        else:
+            assert info["agent_room"] == 2 and info["miner_room"] == 0   # phases 9-13
+    env.close()
+    assert len(rooms) >= 4 and rooms != {(0, 2, 0)}
+

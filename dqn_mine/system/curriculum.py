@@ -5,7 +5,9 @@ Two kinds (``--curriculum``):
 - ``adaptive`` (two-room and three-room): ``phase`` runs from the task's easiest phase down to 1,
   the full task. It moves one phase harder once the mean return of the last ``window`` episodes,
   all started in the current phase, exceeds ``threshold``. With ``review`` > 0 a share of the
-  episodes starts in an easier phase already passed (see :meth:`Curriculum.review_phase`).
+  episodes starts in an easier phase already passed (see :meth:`Curriculum.review_phase`);
+  with ``curriculum_dr`` > 0 a share starts as the full task with random rooms (domain
+  randomisation; recorded as phase 0).
 - ``schedule`` (the rooms task): ``num_rooms`` follows the room counts of the schedule, each for
   an equal share of the updates.
 
@@ -22,6 +24,8 @@ from dqn_mine.config import Config
 from dqn_mine.env.tasks import TASKS, phase_table
 from dqn_mine.metrics import LOW_EPSILON, Rolling
 
+DR_PHASE = 0    # what a domain-randomised episode of the adaptive curriculum is recorded under
+
 
 class Curriculum:
     """State of a run's curriculum; ``kind`` is "none", "adaptive" or "schedule"."""
@@ -32,6 +36,10 @@ class Curriculum:
         self.kind = cfg.curriculum
         self.threshold, self.review = cfg.curriculum_threshold, cfg.curriculum_review
         self.review_pick = cfg.curriculum_review_pick
+        self.review_by_steps = cfg.curriculum_review_unit == "steps"
+        self.dr_share = cfg.curriculum_dr
+        # an actor's steps since the phase it last saw changed: all, and those of review episodes
+        self.seen_phase, self.played_steps, self.review_steps = None, 0, 0
         self.rooms_schedule = tuple(cfg.rooms_schedule)
         self.total_updates = cfg.updates
         self.easiest = (max(phase_table(cfg.task, cfg.boulder_phases))
@@ -96,11 +104,25 @@ class Curriculum:
         """(phase recorded with the episode, environment settings) for an episode that starts
         while the shared state says ``phase`` and ``num_rooms``."""
         if self.kind == "adaptive":
+            if phase != self.seen_phase:
+                self.seen_phase, self.played_steps, self.review_steps = phase, 0, 0
+            if self.dr_share and rng.random() < self.dr_share:
+                return DR_PHASE, self.dr_settings()
             phase = self.review_phase(phase, rng)
             return phase, self.phase_settings(phase)
         if self.kind == "schedule":
             return phase, {"num_rooms": num_rooms}
         return phase, {}
+
+    def played(self, phase: int, steps: int) -> None:
+        """An episode this actor started in ``phase`` ended after ``steps`` steps. Episodes of a
+        phase easier than the current one count as review (also those started before a switch:
+        they are what the replay gets from passed phases)."""
+        if phase == DR_PHASE:
+            return      # neither the current phase's nor a review: outside the count
+        self.played_steps += steps
+        if self.seen_phase is not None and phase > self.seen_phase:
+            self.review_steps += steps
 
     def phase_settings(self, phase: int) -> dict:
         """The environment settings of an episode that starts in ``phase``. With
@@ -108,10 +130,19 @@ class Curriculum:
         task's, which keeps the task's own limit. A shorter limit trades the steps a failed start
         wanders for more starts; it also cuts off a learning agent's slow successes (on two-room
         500 steps did not help one run; docs/exploration.md)."""
-        if self.phase_steps is None:
-            return {"phase": phase}
-        steps = self.full_steps if phase == 1 else self.phase_steps
-        return {"phase": phase, "max_episode_steps": steps}
+        settings = {"phase": phase, "placement": "fixed"} if self.dr_share else {"phase": phase}
+        if self.phase_steps is not None:
+            settings["max_episode_steps"] = self.full_steps if phase == 1 else self.phase_steps
+        return settings
+
+    def dr_settings(self) -> dict:
+        """A domain-randomised episode: the full task's boulders and step limit, agent, kit and
+        miner each in a random room (which includes every phase's rooms, but no boulder moved
+        aside or kit in hand)."""
+        settings = {"phase": None, "placement": "any-room"}
+        if self.phase_steps is not None:
+            settings["max_episode_steps"] = self.full_steps
+        return settings
 
     def review_phase(self, phase: int, rng: np.random.Generator) -> int:
         """The phase an episode starts in: with probability ``review`` an easier one already
@@ -124,11 +155,23 @@ class Curriculum:
         ``review_pick`` "nearest" weights the phase k steps easier by 2**-k, so the phase just
         passed (whose skill the current one builds on directly) is reviewed most: with uniform
         picks from phase 2 each of phases 3-6 got 7.5% of the episodes, and on seed 1 the
-        held-boulder skill of phase 3 decayed while phase 2 stalled."""
-        if phase >= self.easiest or self.review == 0 or not rng.random() < self.review:
+        held-boulder skill of phase 3 decayed while phase 2 stalled.
+
+        ``review_unit`` "steps" makes ``review`` a share of the actor's steps, not of its
+        episodes: a passed phase's successful episode is short and a new phase's failing one
+        runs to the step limit, so with 30% of the episodes reviewed on three-room only ~4% of
+        the transitions came from passed phases, and their skills decayed (docs/three_room.md)."""
+        if phase >= self.easiest or self.review == 0 or not self._reviews(rng):
             return phase
         if self.review_pick == "uniform":
             return int(rng.integers(phase + 1, self.easiest + 1))
         easier = np.arange(phase + 1, self.easiest + 1)
         weights = 0.5 ** (easier - phase)
         return int(rng.choice(easier, p=weights / weights.sum()))
+
+    def _reviews(self, rng: np.random.Generator) -> bool:
+        """Whether the next episode reviews: a draw per episode, or while review episodes have
+        played less than ``review`` of the steps since the phase switch (no draw)."""
+        if self.review_by_steps:
+            return self.review_steps < self.review * self.played_steps
+        return rng.random() < self.review

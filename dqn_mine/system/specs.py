@@ -45,13 +45,15 @@ def env_kwargs(cfg: Config, **override) -> dict:
 
 
 def eval_env_kwargs(cfg: Config) -> dict:
-    """The target task: the full problem, fixed placement and look, the schedule's last room
-    count."""
+    """The target task: the full problem, fixed placement and look, ``eval_num_rooms`` or the
+    schedule's last room count."""
     override = {"placement": "fixed", "randomise_visuals": False}
     if cfg.eval_task and cfg.eval_task != cfg.task:
         override.update(task=cfg.eval_task, max_episode_steps=None)
     if cfg.curriculum == "schedule":
         override["num_rooms"] = int(cfg.rooms_schedule[-1])
+    if cfg.eval_num_rooms is not None:
+        override["num_rooms"] = cfg.eval_num_rooms
     return env_kwargs(cfg, **override)
 
 

@@ -1,14 +1,19 @@
-"""Exploration: plain epsilon-greedy vs adaptive curriculum vs any-room placement on
-three-room, compared through the evaluation actor on the full task."""
+"""Exploration: plain epsilon-greedy vs adaptive curriculum vs any-room placement (domain
+randomisation) vs both on three-room, compared through the evaluation actor on the full task."""
 
 from experiments.scales import CPU, CPU_MINUTES, PAPER_NOTE, QUICK, SMOKE, SMOKE_NOTE
 
-TITLE = "Exploration: baseline vs curriculum (phases) vs domain randomisation (three-room)"
+TITLE = ("Exploration: baseline vs curriculum (phases) vs domain randomisation vs both "
+         "(three-room)")
 CONFIGS = {
     "baseline": {},
     "curriculum": {"curriculum": "adaptive"},
     "any-room": {"placement": "any-room"},
+    # both: 30% of the episodes start as the full task in random rooms, the rest follow the
+    # phases (the curriculum's rule counts only those)
+    "curriculum+dr": {"curriculum": "adaptive", "curriculum_dr": 0.3},
 }
+CPU_PHASES = {"boulder_phases": True, "curriculum_review": 0.5, "curriculum_review_unit": "steps"}
 BASE = {"task": "three-room", "eval_every": 10_000, "eval_episodes": 10}
 SCALES = {
     "paper": {"base": {"updates": 1_000_000}, "seeds": 5, "note": PAPER_NOTE},
@@ -19,11 +24,12 @@ SCALES = {
                       "12,000 updates, 1 actor and the evaluation actor, one seed; the full "
                       "task is far out of reach at this budget, watch the curriculum phase"},
     # The cpu preset's exploration on the full three-room; only the curriculum uses phases
-    # (its eleven boulder phases, as the cpu-three-room preset).
+    # (its thirteen boulder phases and review by steps, as the cpu-three-room preset).
     "cpu": {"base": {**CPU, "task": "three-room", "minutes": CPU_MINUTES},
             "override": {"baseline": {"curriculum": "none"},
-                         "curriculum": {"boulder_phases": True},
-                         "any-room": {"curriculum": "none"}},
+                         "curriculum": CPU_PHASES,
+                         "any-room": {"curriculum": "none"},
+                         "curriculum+dr": CPU_PHASES},
             "seeds": 1,
             "note": f"full-size three-room (16 x 16 rooms, 2,000 steps) on 2 CPU cores: the cpu "
                     f"preset's actors and learner, {CPU_MINUTES} minutes a run, one seed"},
@@ -38,5 +44,7 @@ CLAIMS = [
      "curriculum", ">", "baseline"),
     ("any-room ahead of baseline on the full task", "final_eval_return_mean",
      "any-room", ">", "baseline"),
+    ("curriculum+dr ahead of baseline on the full task", "final_eval_return_mean",
+     "curriculum+dr", ">", "baseline"),
 ]
 EXTRA_PLOTS = ("episode_return", "phase")
