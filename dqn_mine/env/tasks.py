@@ -27,12 +27,13 @@ has phases 1-6 built the same way (see ``TWO_ROOM_PHASES`` and below):
 in room 0 holding that boulder; 4 the doorway cleared; 5 the agent in room 1 (the one-room problem
 there); 6 the agent in room 1 carrying the kit.
 
-``three-room`` with ``boulder_phases=True`` (thirteen phases, the study's six renumbered 13, 12,
-11, 9, 5, 1): 1 the full task; 2 the agent in room 0, 2-4 units from the boulder of doorway 0-1;
-3 in room 0 holding that boulder; 4 in room 0 with doorway 0-1 cleared; 5 the study's phase 2;
-6 in room 1, 2-4 units from the boulder of doorway 1-2 (doorway 0-1 cleared); 7 in room 1 holding
-that boulder; 8 in room 1 with both doorways cleared; 9 the study's phase 3; 10 in room 2, 2-4
-units from the kit (both doorways cleared); 11-13 the study's phases 4-6.
+``three-room`` with ``boulder_phases=True`` (fifteen phases, the study's six renumbered 15, 14,
+13, 11, 6, 1): 1 the full task; 2 the agent in room 0, 2-4 units from the boulder of doorway 0-1;
+3 in room 0 holding that boulder; 4 in room 0 with doorway 0-1 cleared; 5 in room 1 holding the
+boulder of doorway 0-1; 6 the study's phase 2; 7 in room 1, 2-4 units from the boulder of doorway
+1-2 (doorway 0-1 cleared); 8 in room 1 holding that boulder; 9 in room 1 with both doorways
+cleared; 10 in room 2 holding the boulder of doorway 1-2; 11 the study's phase 3; 12 in room 2,
+2-4 units from the kit (both doorways cleared); 13-15 the study's phases 4-6.
 """
 
 from __future__ import annotations
@@ -83,30 +84,33 @@ TWO_ROOM_PHASES = {
     5: Phase(1, 1, False),
     6: Phase(1, 1, True),
 }
-# three-room with ``boulder_phases=True``: the study's six phases (here 13, 12, 11, 9, 5, 1) with
-# three steps inserted before each phase that must clear a doorway (as two-room's phases 4-2: the
-# doorway already cleared, its boulder in hand, a start a few steps from it), and a start a few
-# steps from the kit before the first phase that must take it. Without the near-kit phase (one
-# run) the agent that had only ever started with the kit in hand left room 2 without it in most
-# episodes of the study's phase 3, which sat at a return of 0.2-0.5 for 23 minutes. Without the
-# cleared-doorway phases (eleven phases, two runs) the step from room 2 to "room 1 holding the
-# boulder of doorway 1-2" asked for two new skills at once (put the boulder down out of the way,
-# and walk from room 1 into room 2 without the kit, never done before), and neither run passed
-# it in 16-70 minutes.
+# three-room with ``boulder_phases=True``: the study's six phases (here 15, 14, 13, 11, 6, 1) with
+# four steps inserted before each phase that must clear a doorway (as two-room's phases 4-2: the
+# doorway already cleared, its boulder in hand, a start a few steps from it; and, first, the
+# boulder in hand one room further on), and a start a few steps from the kit before the first
+# phase that must take it. Each fixes a stall seen in a run (docs/three_room.md): without the
+# near-kit phase the agent that had only ever started with the kit in hand left room 2 without
+# it; without the cleared-doorway phases the step to "room 1 holding the boulder of doorway 1-2"
+# asked for two new skills at once and never passed; and an agent that takes a boulder carries
+# it through the doorway it cleared (nothing stops it) and then did not know how to let go of it
+# next to the kit (it wandered room 2 holding it for hundreds of steps), hence the phases that
+# start in the next room with the boulder still in hand.
 THREE_ROOM_BOULDER_PHASES = {
     1: Phase(0, 0, False),
     2: Phase(0, 0, False, near_boulder=True),
     3: Phase(0, 0, False, holding_boulder=True),
     4: Phase(0, 1, False),
-    5: Phase(1, 1, False),
-    6: Phase(1, 1, False, near_boulder=True),
-    7: Phase(1, 1, False, holding_boulder=True),
-    8: Phase(1, 2, False),
-    9: Phase(2, 2, False),
-    10: Phase(2, 2, False, near_kit=True),
-    11: Phase(2, 2, True),
-    12: Phase(1, 2, True),
-    13: Phase(0, 2, True),
+    5: Phase(1, 0, False, holding_boulder=True),
+    6: Phase(1, 1, False),
+    7: Phase(1, 1, False, near_boulder=True),
+    8: Phase(1, 1, False, holding_boulder=True),
+    9: Phase(1, 2, False),
+    10: Phase(2, 1, False, holding_boulder=True),
+    11: Phase(2, 2, False),
+    12: Phase(2, 2, False, near_kit=True),
+    13: Phase(2, 2, True),
+    14: Phase(1, 2, True),
+    15: Phase(0, 2, True),
 }
 NEAR_BOULDER = (2.0, 4.0)   # distance of the agent from the boulder (or kit) it starts near
 TASK_PHASES = {"two-room": TWO_ROOM_PHASES, "three-room": PHASES}
@@ -217,9 +221,9 @@ class MineRescueEnv(MineEnv):
         placement: "fixed" or "any-room" (domain randomisation of the start rooms).
         phase: curriculum phase 1..6 of ``three-room`` or 1..6 of ``two-room`` (1 = the full
             task), or None.
-        boulder_phases: ``three-room`` only: phases 1..13, the six with a start near each
-            blocked doorway, one holding its boulder, one with it cleared and one near the kit
-            inserted (see ``phase_table``).
+        boulder_phases: ``three-room`` only: phases 1..15, the six with starts near each
+            blocked doorway, holding its boulder (in its room and in the next), with it cleared,
+            and near the kit inserted (see ``phase_table``).
         render_mode: None or "rgb_array" (first-person view and map side by side).
         randomise_visuals: draw the light level, the wall colour and the field of view anew each
             episode (visual domain randomisation; the layout of a seed does not change).
