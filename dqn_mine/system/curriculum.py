@@ -157,7 +157,7 @@ class Curriculum:
         picks from phase 2 each of phases 3-6 got 7.5% of the episodes, and on seed 1 the
         held-boulder skill of phase 3 decayed while phase 2 stalled.
 
-        ``review_unit`` "steps" makes ``review`` a share of the actor's steps, not of its
+        ``curriculum_review_unit`` "steps" makes ``review`` a share of the actor's steps, not of its
         episodes: a passed phase's successful episode is short and a new phase's failing one
         runs to the step limit, so with 30% of the episodes reviewed on three-room only ~4% of
         the transitions came from passed phases, and their skills decayed (docs/three_room.md)."""
