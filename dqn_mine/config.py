@@ -30,7 +30,8 @@ ACTOR_PRECISIONS = ("auto", "float32", "bfloat16")
 LEARNER_PRECISIONS = ACTOR_PRECISIONS   # auto, or a dtype by name
 EPSILON_SCHEDULES = ("fixed", "apex")
 INIT_PRIORITIES = ("actor", "max")
-CURRICULA = ("none", "adaptive", "schedule")
+CURRICULA = ("none", "adaptive", "uniform", "schedule")
+PHASED_CURRICULA = ("adaptive", "uniform")   # those that start episodes in phases
 EXPLORATIONS = ("epsilon", "ez")
 REVIEW_PICKS = ("uniform", "nearest")
 REVIEW_UNITS = ("episodes", "steps")
@@ -63,9 +64,12 @@ class Config:
                         "randomisation)", PLACEMENTS)
     visual_randomisation: bool = _f(False, "draw light, wall colour and field of view anew each "
                                     "episode (training actors only)")
+    room_colours: bool = _f(False, "each room's floor in a colour of its own (rooms told apart "
+                            "by sight, also through a doorway); training and evaluation alike")
     curriculum: str = _f("none", "adaptive: phases 6->1 (three-room and two-room), one "
-                         "harder when the rolling return passes the threshold; schedule: room "
-                         "counts by share of updates", CURRICULA)
+                         "harder when the rolling return passes the threshold; uniform: every "
+                         "episode starts in a phase drawn uniformly, the full task included "
+                         "(no switches); schedule: room counts by share of updates", CURRICULA)
     curriculum_threshold: float = _f(0.6, "rolling mean return that advances a curriculum phase")
     curriculum_window: int = _f(50, "episodes in the rolling mean that advances the curriculum")
     curriculum_review: float = _f(0.0, "adaptive curriculum: share of episodes that start in an "
@@ -86,9 +90,9 @@ class Config:
                               "episodes that start as the full task with --placement any-room's "
                               "random rooms instead of in a phase (they do not count towards "
                               "the phase's switch)")
-    boulder_phases: bool = _f(False, "three-room adaptive curriculum: 15 phases, starts near "
-                              "each blocked doorway, holding its boulder (in its room and the "
-                              "next) and with it cleared inserted before each phase that must "
+    boulder_phases: bool = _f(False, "three-room curriculum: 17 phases, starts near each "
+                              "blocked doorway, facing its boulder, holding it (in its room and "
+                              "the next) and with it cleared inserted before each phase that must "
                               "clear it, and one near the kit (two-room's phases have some)")
     rooms_schedule: tuple[int, ...] = _f((3, 4, 5), "room counts of the schedule curriculum, each "
                                          "for an equal share of the updates")
@@ -304,7 +308,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     },
 }
 # The full three-room task (2,000 steps) on a few-core CPU machine: the cpu preset's settings,
-# with the adaptive curriculum over the fifteen boulder phases (the study's six phases leave
+# with the adaptive curriculum over the seventeen boulder phases (the study's six phases leave
 # steps where a doorway must be cleared without ever having walked up to a blocked one or
 # through a cleared one, which on two-room was the wall until such phases existed, and one where
 # the kit must be taken after only ever starting with it in hand; see dqn_mine/env/tasks.py), half
@@ -424,22 +428,24 @@ def _task_problems(c: Config) -> list[str]:
         p.append(f"--curriculum-steps must be at least 1, got {c.curriculum_steps}")
     if not 0.0 <= c.curriculum_dr < 1.0:
         p.append(f"--curriculum-dr must be in [0, 1), got {c.curriculum_dr}")
-    if c.curriculum_dr and c.curriculum != "adaptive":
-        p.append("--curriculum-dr applies to --curriculum adaptive only (for domain "
+    if c.curriculum_dr and c.curriculum not in PHASED_CURRICULA:
+        p.append("--curriculum-dr applies to --curriculum adaptive or uniform only (for domain "
                  "randomisation alone use --placement any-room)")
-    if c.curriculum_steps is not None and c.curriculum != "adaptive":
-        p.append("--curriculum-steps applies to --curriculum adaptive only")
+    if c.curriculum_steps is not None and c.curriculum not in PHASED_CURRICULA:
+        p.append("--curriculum-steps applies to --curriculum adaptive or uniform only")
     if c.task == "rooms" and not 2 <= c.num_rooms <= MAX_ROOMS:
         p.append(f"--num-rooms must be in 2..{MAX_ROOMS} for the rooms task, got {c.num_rooms}")
     if c.task != "rooms" and c.num_rooms != _field("num_rooms").default:
         p.append(f"--num-rooms applies to --task rooms only ({c.task} has its own room count)")
-    if c.curriculum == "adaptive" and c.placement != "fixed":
-        p.append("--curriculum adaptive sets the start of each episode, so it needs "
+    if c.curriculum in PHASED_CURRICULA and c.placement != "fixed":
+        p.append(f"--curriculum {c.curriculum} sets the start of each episode, so it needs "
                  "--placement fixed")
-    if c.curriculum == "adaptive" and c.task not in ("two-room", "three-room"):
-        p.append(f"--curriculum adaptive needs --task two-room or three-room, got {c.task}")
-    if c.boulder_phases and (c.task != "three-room" or c.curriculum != "adaptive"):
-        p.append("--boulder-phases applies to --task three-room --curriculum adaptive only")
+    if c.curriculum in PHASED_CURRICULA and c.task not in ("two-room", "three-room"):
+        p.append(f"--curriculum {c.curriculum} needs --task two-room or three-room, "
+                 f"got {c.task}")
+    if c.boulder_phases and (c.task != "three-room" or c.curriculum not in PHASED_CURRICULA):
+        p.append("--boulder-phases applies to --task three-room --curriculum adaptive or "
+                 "uniform only")
     if c.curriculum == "schedule" and (c.task != "rooms" or not c.rooms_schedule
                                     or min(c.rooms_schedule) < 2
                                     or max(c.rooms_schedule) > MAX_ROOMS):

@@ -3,9 +3,11 @@
 Plays N episodes (seeds S, S+1, ...) greedily, or with ``--epsilon``, on the task the checkpoint
 was trained on unless ``--task`` and the other environment flags say otherwise; prints the mean
 and spread of the return, the success rate and the mean length, and writes ``eval.json`` next to
-the checkpoint (``--out`` elsewhere). ``--video PATH`` also records the first episode (GIF, or
-MP4 with imageio-ffmpeg). ``outcomes`` counts how the episodes ended: delivered, still holding
-the kit or a boulder, the kit taken and dropped again, the kit never taken.
+the checkpoint (``--out`` elsewhere). ``--video PATH`` also records one of the scored episodes
+(GIF, or MP4 with imageio-ffmpeg): the first, or with ``--video-of delivered`` the first that
+delivered (an agent that succeeds now and then on a long task is worth seeing succeed).
+``outcomes`` counts how the episodes ended: delivered, still holding the kit or a boulder, the
+kit taken and dropped, the kit never taken.
 """
 
 from __future__ import annotations
@@ -25,7 +27,6 @@ from dqn_mine.play import (
     check_video_path,
     fill_env_settings,
     make_env,
-    record,
 )
 from dqn_mine.video import save_video
 
@@ -36,28 +37,38 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("checkpoint", help="run folder or checkpoint.pt")
     ap.add_argument("--episodes", type=int, default=20, help="episodes to play")
     add_episode_arguments(ap)
-    ap.add_argument("--video", default=None, help="video of the first episode (.gif or .mp4)")
+    ap.add_argument("--video", default=None, help="video of a scored episode (.gif or .mp4)")
+    ap.add_argument("--video-of", choices=VIDEO_OF, default="first",
+                    help="which episode --video records: the first, or the first delivered "
+                         "(none delivered: no video)")
     ap.add_argument("--out", default=None, help="eval.json path (default: next to the checkpoint)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     return ap
 
+
+VIDEO_OF = ("first", "delivered")
 
 # How an episode ended, for eval.json's "outcomes": what failed, not only that it did.
 OUTCOMES = ("delivered", "holding the kit", "holding a boulder", "kit dropped",
             "kit never taken")
 
 
-def play_episode(env, agent, seed: int) -> tuple[float, int, str]:
-    """Return, length and outcome (one of OUTCOMES) of one episode."""
+def play_episode(env, agent, seed: int, frames: list | None = None) -> tuple[float, int, str]:
+    """Return, length and outcome (one of OUTCOMES) of one episode; its rendered frames are
+    appended to ``frames`` when given."""
     obs, info = env.reset(seed=seed)
     agent.reset()
     total, steps, had_kit = 0.0, 0, info["carrying_kit"]
     while True:
+        if frames is not None:
+            frames.append(env.render())
         obs, reward, terminated, truncated, info = env.step(agent.predict(obs, info))
         total += reward
         steps += 1
         had_kit = had_kit or info["carrying_kit"]
         if terminated or truncated:
+            if frames is not None:
+                frames.append(env.render())
             return total, steps, _outcome(env.unwrapped, terminated, had_kit)
 
 
@@ -69,20 +80,28 @@ def _outcome(env, terminated: bool, had_kit: bool) -> str:
     return "kit dropped" if had_kit else "kit never taken"
 
 
-def evaluate(env, agent, episodes: int, seed: int, progress: bool = True) -> dict:
-    """Scores of ``episodes`` episodes with seeds ``seed``, ``seed + 1``, ..."""
+def evaluate(env, agent, episodes: int, seed: int, progress: bool = True,
+             video_of: str | None = None) -> tuple[dict, list]:
+    """Scores of ``episodes`` episodes with seeds ``seed``, ``seed + 1``, ..., and the frames of
+    the episode ``video_of`` names (see VIDEO_OF; none: no frames). Filming renders only until
+    that episode is found; the scores are the same with or without it."""
     from tqdm import tqdm
 
     returns, lengths, outcomes = [], [], dict.fromkeys(OUTCOMES, 0)
+    filmed, filmed_seed = [], None
     for i in tqdm(range(episodes), desc="evaluating", unit="episode", disable=not progress):
-        total, steps, outcome = play_episode(env, agent, seed + i)
+        frames = [] if video_of and filmed_seed is None else None
+        total, steps, outcome = play_episode(env, agent, seed + i, frames)
+        if frames is not None and (video_of == "first" or outcome == "delivered"):
+            filmed, filmed_seed = frames, seed + i
         returns.append(total)
         lengths.append(steps)
         outcomes[outcome] += 1
     returns = np.asarray(returns)
     return {"episodes": episodes, "success_rate": float(np.mean(returns > 0)),
             "mean_return": float(returns.mean()), "std_return": float(returns.std()),
-            "mean_length": float(np.mean(lengths)), "seed": seed, "outcomes": outcomes}
+            "mean_length": float(np.mean(lengths)), "seed": seed, "outcomes": outcomes,
+            "video_seed": filmed_seed}, filmed
 
 
 def check_settings(args: argparse.Namespace) -> None:
@@ -114,10 +133,9 @@ def main(argv=None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
-        scores = evaluate(env, agent, args.episodes, args.seed, progress=not args.quiet)
-        if args.video:
-            agent.reset()
-            frames, _, _ = record(env, agent, args.seed, progress=not args.quiet)
+        scores, frames = evaluate(env, agent, args.episodes, args.seed, progress=not args.quiet,
+                                  video_of=args.video_of if args.video else None)
+        if frames:
             save_video(frames, Path(args.video), 15.0)
     finally:
         env.close()
@@ -131,6 +149,9 @@ def main(argv=None) -> int:
           f"{scores['std_return']:.3f}, success {scores['success_rate']:.0%}, "
           f"mean length {scores['mean_length']:.0f} -> {out}")
     print("  ended: " + ", ".join(f"{k} {v}" for k, v in scores["outcomes"].items() if v))
+    if args.video:
+        print(f"  video: episode seed {scores['video_seed']} -> {args.video}" if frames else
+              f"  video: no episode delivered, none written (--video-of {args.video_of})")
     return 0
 
 

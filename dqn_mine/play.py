@@ -50,9 +50,10 @@ POLICIES: dict[str, Callable[[argparse.Namespace], Policy]] = {
 
 # Environment settings play takes from a checkpoint's config unless given on the command line.
 ENV_DEFAULTS = {"task": "two-room", "room_size": 16.0, "placement": "fixed", "num_rooms": None,
-                "max_steps": None}
+                "max_steps": None, "room_colours": False}
 CONFIG_KEYS = {"task": "task", "room_size": "room_size", "placement": "placement",
-               "num_rooms": "num_rooms", "max_steps": "max_episode_steps"}
+               "num_rooms": "num_rooms", "max_steps": "max_episode_steps",
+               "room_colours": "room_colours"}
 
 
 def fill_env_settings(args: argparse.Namespace) -> None:
@@ -83,6 +84,8 @@ def make_env(args: argparse.Namespace):
         kwargs["phase"] = args.phase
     if args.boulder_phases:
         kwargs["boulder_phases"] = True
+    if args.room_colours:
+        kwargs["room_colours"] = True
     if args.max_steps is not None:
         kwargs["max_episode_steps"] = args.max_steps
     return MineRescueEnv(**kwargs)
@@ -139,9 +142,12 @@ def add_episode_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--phase", type=int, default=None,
                     help="curriculum phase: 1..6 of three-room and of two-room")
     ap.add_argument("--boulder-phases", action="store_true",
-                    help="three-room: --phase counts the fifteen boulder phases (as train's)")
+                    help="three-room: --phase counts the seventeen boulder phases (as train's)")
     ap.add_argument("--visual-randomisation", action="store_true",
                     help="random light, wall colour and field of view")
+    ap.add_argument("--room-colours", action=argparse.BooleanOptionalAction, default=None,
+                    help="each room's floor in a colour of its own (default: the checkpoint's, "
+                         "else off)")
     ap.add_argument("--seed", type=int, default=0, help="episode seed (the first one)")
     ap.add_argument("--max-steps", type=int, default=None, help="step limit (default: the task's)")
 

@@ -19,7 +19,8 @@ import math
 import sys
 from pathlib import Path
 
-from dqn_mine.config import Config
+from dqn_mine.config import PHASED_CURRICULA, Config
+from dqn_mine.env import tasks
 from dqn_mine.exitcodes import EXIT_BAD_INPUT
 from dqn_mine.metrics import LOW_EPSILON, read_metrics
 
@@ -46,13 +47,14 @@ def has_values(rows: list[dict], name: str) -> bool:
 def full_task_returns(rows: list[dict], cfg, low_eps: bool = False) -> list[tuple]:
     """(update, minutes, return) of the rows whose return is the full task's over a full window.
 
-    With the adaptive curriculum that is phase 1's ``phase_return`` (its own episodes only, no
+    With the adaptive curriculum (or the uniform one, a phase-1 episode in every table's
+    length) that is phase 1's ``phase_return`` (its own episodes only, no
     reviewed ones) from the row by which about ``curriculum_window`` phase-1 episodes have ended
     (estimated from the episode count since the switch and the review share, since the table
     does not count them); without it the actors' ``episode_return`` once ``return_window``
     episodes have ended. ``low_eps``: the same rows' means over the episodes played at epsilon
     <= 0.01 (``phase_low_eps_return``, ``low_eps_return``)."""
-    if cfg.curriculum != "adaptive":
+    if cfg.curriculum not in PHASED_CURRICULA:
         key = "low_eps_return" if low_eps else "episode_return"
         return [(r["update"], r["wall_time"] / 60, r.get(key, math.nan)) for r in rows
                 if r["episodes"] >= cfg.return_window]
@@ -61,7 +63,10 @@ def full_task_returns(rows: list[dict], cfg, low_eps: bool = False) -> list[tupl
     if not full:
         return []
     start = full[0]["episodes"]
-    share = 1.0 - cfg.curriculum_review
+    if cfg.curriculum == "uniform":
+        share = 1.0 / len(tasks.phase_table(cfg.task, cfg.boulder_phases))
+    else:
+        share = 1.0 - cfg.curriculum_review
     return [(r["update"], r["wall_time"] / 60, r.get(key, math.nan)) for r in full
             if (r["episodes"] - start) * share >= cfg.curriculum_window]
 

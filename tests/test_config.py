@@ -115,7 +115,7 @@ BAD = [
     (["--room-size", "0"], "--room-size"),
     (["--max-episode-steps", "0"], "--max-episode-steps"),
     (["--curriculum", "adaptive", "--curriculum-steps", "0"], "--curriculum-steps"),
-    (["--curriculum-steps", "300"], "adaptive only"),
+    (["--curriculum-steps", "300"], "adaptive or uniform only"),
     (["--task", "rooms", "--num-rooms", "1"], "--num-rooms"),
     (["--curriculum", "adaptive", "--task", "one-room"], "three-room"),
     (["--boulder-phases", "--task", "two-room", "--curriculum", "adaptive"], "three-room"),

@@ -100,6 +100,9 @@ def test_phase_starts_as_specified(task, boulder, phase, kit_room, miner_room):
         if want.near_boulder:   # a few steps from the boulder that blocks the next doorway
             boulder = [e for e in env.world_entities() if e.kind == BOULDER][cleared]
             assert 2.0 <= math.dist((env.agent_x, env.agent_z), (boulder.x, boulder.z)) <= 4.0
+        if want.facing_boulder:  # one press of action 4 takes that boulder
+            boulder = [e for e in env.world_entities() if e.kind == BOULDER][cleared]
+            assert env.facing() is boulder
         if want.near_kit:
             assert 2.0 <= math.dist((env.agent_x, env.agent_z), (env.kit.x, env.kit.z)) <= 4.0
     env.close()

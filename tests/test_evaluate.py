@@ -12,7 +12,9 @@ import pytest
 
 import dqn_mine
 from dqn_mine.env import MineRescueEnv
+from dqn_mine.env.expert import Expert
 from dqn_mine.evaluate import OUTCOMES, _outcome
+from dqn_mine.evaluate import evaluate as evaluate_episodes
 
 ROOT = Path(__file__).resolve().parents[1]
 FIELDS = {"episodes", "success_rate", "mean_return", "std_return", "mean_length", "task", "seed"}
@@ -115,3 +117,38 @@ def test_missing_or_corrupt_checkpoint_is_one_line(tmp_path):
         assert res.stderr.startswith("error:") and res.stderr.strip().count("\n") == 0
     with pytest.raises(ValueError):
         dqn_mine.load_agent(bad)
+
+
+class _ExpertEverySecondEpisode:
+    """Only turns in its first, third, ... episode and plays the scripted expert in the others:
+    some episodes deliver, some do not."""
+
+    def __init__(self, env):
+        self.env, self.expert, self.episodes = env, None, 0
+
+    def reset(self):
+        self.episodes += 1
+        self.expert = Expert(self.env) if self.episodes % 2 == 0 else None
+
+    def predict(self, obs, info):
+        return self.expert.act() if self.expert else 0
+
+
+def test_video_of_delivered_films_the_first_delivered_episode_and_keeps_the_scores():
+    env = MineRescueEnv(task="one-room", room_size=8.0, max_episode_steps=60,
+                        render_mode="rgb_array")
+    agent = _ExpertEverySecondEpisode(env)
+    plain, none = evaluate_episodes(env, agent, 4, seed=10, progress=False)
+    first, first_frames = evaluate_episodes(env, _ExpertEverySecondEpisode(env), 4, seed=10,
+                                            progress=False, video_of="first")
+    scores, frames = evaluate_episodes(env, _ExpertEverySecondEpisode(env), 4, seed=10,
+                                       progress=False, video_of="delivered")
+    env.close()
+    assert none == [] and plain["video_seed"] is None
+    assert plain["outcomes"]["delivered"] == 2 and plain["outcomes"]["kit never taken"] == 2
+    assert {k: v for k, v in scores.items() if k != "video_seed"} == \
+        {k: v for k, v in plain.items() if k != "video_seed"}
+    assert first["video_seed"] == 10 and len(first_frames) == 61      # 60 steps, undelivered
+    assert scores["video_seed"] == 11 and 2 < len(frames) < 61          # delivered sooner
+    assert frames[0].ndim == 3 and frames[0].shape[2] == 3
+    assert not np.array_equal(frames[0], frames[-1])

@@ -154,3 +154,16 @@ def test_checkpoint_with_missing_parts_is_one_line(tmp_path, content):
     assert res.returncode == 2, res.stderr
     assert len(res.stderr.strip().splitlines()) == 1 and "checkpoint" in res.stderr
     assert not (tmp_path / "x.gif").exists()
+
+
+@pytest.mark.parametrize("flag,coloured", [([], False), (["--room-colours"], True)])
+def test_room_colours_flag_builds_the_coloured_env(flag, coloured):
+    from dqn_mine.play import build_parser, fill_env_settings, make_env
+
+    args = build_parser().parse_args(["--policy", "random", "--task", "three-room", *flag])
+    fill_env_settings(args)
+    env = make_env(args)
+    try:
+        assert env.room_colours is coloured
+    finally:
+        env.close()

@@ -8,6 +8,8 @@ wall share one vertex buffer and one draw call.
 
 from __future__ import annotations
 
+import colorsys
+
 import numpy as np
 
 from dqn_mine.env.layout import Layout
@@ -21,6 +23,10 @@ PLAIN, ROCK, FLOOR, CEILING, WOOD = 0.0, 1.0, 2.0, 3.0, 4.0
 ROCK_COLOUR = (0.50, 0.36, 0.24)
 FLOOR_COLOUR = (0.24, 0.21, 0.18)
 CEILING_COLOUR = (0.20, 0.17, 0.14)
+# With room colours each room's floor has a hue of its own, dim and half-saturated like the rock
+# (the kit's red and the miner's orange and yellow stay the brightest colours in view); hues step
+# by the golden ratio so that neighbouring room indices differ most.
+ROOM_FLOOR_VALUE, ROOM_FLOOR_SATURATION, ROOM_FLOOR_HUE0 = 0.34, 0.55, 0.08
 WOOD_COLOUR = (0.62, 0.42, 0.20)
 KIT_RED = (0.86, 0.07, 0.07)
 WHITE = (0.95, 0.95, 0.95)
@@ -84,14 +90,24 @@ def boxes(centers, sizes, colours, material: float = PLAIN) -> np.ndarray:
     return quads(corners.reshape(-1, 4, 3), cols.reshape(-1, 4, 3), material)
 
 
-def static_scene(layout: Layout, wall_height: float, door_height: float) -> np.ndarray:
-    """Walls with doorway gaps, lintels, timber door frames, floors and ceilings of a layout."""
+def room_floor_colours(count: int) -> np.ndarray:
+    """(count, 3): room i's floor colour when rooms are told apart by colour."""
+    hues = (ROOM_FLOOR_HUE0 + 0.618034 * np.arange(count)) % 1.0
+    return np.array([colorsys.hsv_to_rgb(h, ROOM_FLOOR_SATURATION, ROOM_FLOOR_VALUE)
+                     for h in hues])
+
+
+def static_scene(layout: Layout, wall_height: float, door_height: float,
+                 room_colours: bool = False) -> np.ndarray:
+    """Walls with doorway gaps, lintels, timber door frames, floors and ceilings of a layout;
+    ``room_colours``: each room's floor in a colour of its own (``room_floor_colours``)."""
     segs = [_seg(v, w, lo, hi, 0.0, wall_height) for v, w, lo, hi in layout.walls]
     segs += [_seg(d.vertical, d.wall, d.lo, d.hi, door_height, wall_height) for d in layout.doors]
     segs = np.array(segs, float)
     parts = [_walls(segs, wall_height)]
     rooms = np.array([[r.x0, r.z0, r.x1, r.z1] for r in layout.rooms], float)
-    parts.append(_horizontal(rooms, 0.0, FLOOR_COLOUR, FLOOR))
+    floors = room_floor_colours(len(rooms)) if room_colours else FLOOR_COLOUR
+    parts.append(_horizontal(rooms, 0.0, floors, FLOOR))
     parts.append(_horizontal(rooms, wall_height, CEILING_COLOUR, CEILING))
     if layout.doors:
         parts.append(_door_frames(layout, door_height))
@@ -114,12 +130,13 @@ def _walls(segs: np.ndarray, height: float) -> np.ndarray:
 
 
 def _horizontal(rooms: np.ndarray, y: float, colour, material: float) -> np.ndarray:
+    """Floors or ceilings at height ``y``: ``colour`` (3,) for all rooms or (rooms, 3)."""
     x0, z0, x1, z1 = rooms.T
     ys = np.full_like(x0, y)
     corners = np.stack([np.stack([x0, ys, z0], -1), np.stack([x1, ys, z0], -1),
                         np.stack([x1, ys, z1], -1), np.stack([x0, ys, z1], -1)], 1)
-    colours = np.broadcast_to(np.array(colour, float), corners.shape)
-    return quads(corners, colours, material)
+    colours = np.broadcast_to(np.array(colour, float), (len(rooms), 3))
+    return quads(corners, np.broadcast_to(colours[:, None, :], corners.shape), material)
 
 
 def _door_frames(layout: Layout, door_height: float) -> np.ndarray:

@@ -84,13 +84,15 @@ class MineEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
 
     def __init__(self, max_episode_steps: int, room_size: float = 16.0,
-                 render_mode: str | None = None, randomise_visuals: bool = False):
+                 render_mode: str | None = None, randomise_visuals: bool = False,
+                 room_colours: bool = False):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.render_mode = render_mode
         self.room_size = float(room_size)
         self.max_episode_steps = int(max_episode_steps)
         self.randomise_visuals = bool(randomise_visuals)
+        self.room_colours = bool(room_colours)
         self.light, self.tint, self.fov_y = 1.0, np.ones(3, np.float32), FOV_Y
         self.observation_space = spaces.Box(0, 255, FRAME_SHAPE, np.uint8)
         self.action_space = spaces.Discrete(NUM_ACTIONS)
@@ -355,7 +357,8 @@ class MineEnv(gym.Env):
             dynamic[:, 3:6] *= self.light   # concatenate and place made copies: the cached
             held[:, 3:6] *= self.light      # meshes stay
         if static:
-            static_mesh = mesh.static_scene(self.layout, WALL_HEIGHT, DOOR_HEIGHT)
+            static_mesh = mesh.static_scene(self.layout, WALL_HEIGHT, DOOR_HEIGHT,
+                                            self.room_colours)
             if self.randomise_visuals:
                 static_mesh[:, 3:6] *= self.light * self.tint
             self._scene.set_fov(self.fov_y)
@@ -416,6 +419,23 @@ class MineEnv(gym.Env):
         self.agent_x, self.agent_z = self._random_spot(AGENT_RADIUS, room, 0.0,
                                                        ring=(item, near, far))
         self.heading = self._rng.randrange(HEADINGS)
+
+    def place_agent_facing(self, room: int, item: Entity) -> None:
+        """The agent in ``room`` just clear of ``item``, facing it: one press of action 4 takes
+        it. The heading is drawn among those that allow this (from a doorway's boulder: the
+        half-circle on ``room``'s side)."""
+        dist = AGENT_RADIUS + item.radius + 0.1
+        others = [e for e in self.entities if e is not item and e is not self.carrying]
+        for heading in self._rng.sample(range(HEADINGS), HEADINGS):
+            x, z = item.x - dist * _COS[heading], item.z - dist * _SIN[heading]
+            if self.layout.room_at(x, z) != room or not self.layout.fits(x, z, AGENT_RADIUS):
+                continue
+            if any(math.hypot(x - e.x, z - e.z) < AGENT_RADIUS + e.radius for e in others):
+                continue
+            self.agent_x, self.agent_z, self.heading = x, z, heading
+            if self.facing() is item:
+                return
+        raise RuntimeError(f"no spot in room {room} facing the {item.kind} within reach")
 
     def add(self, ent: Entity) -> Entity:
         self.entities.append(ent)

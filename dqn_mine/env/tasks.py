@@ -27,13 +27,14 @@ has phases 1-6 built the same way (see ``TWO_ROOM_PHASES`` and below):
 in room 0 holding that boulder; 4 the doorway cleared; 5 the agent in room 1 (the one-room problem
 there); 6 the agent in room 1 carrying the kit.
 
-``three-room`` with ``boulder_phases=True`` (fifteen phases, the study's six renumbered 15, 14,
-13, 11, 6, 1): 1 the full task; 2 the agent in room 0, 2-4 units from the boulder of doorway 0-1;
-3 in room 0 holding that boulder; 4 in room 0 with doorway 0-1 cleared; 5 in room 1 holding the
-boulder of doorway 0-1; 6 the study's phase 2; 7 in room 1, 2-4 units from the boulder of doorway
-1-2 (doorway 0-1 cleared); 8 in room 1 holding that boulder; 9 in room 1 with both doorways
-cleared; 10 in room 2 holding the boulder of doorway 1-2; 11 the study's phase 3; 12 in room 2,
-2-4 units from the kit (both doorways cleared); 13-15 the study's phases 4-6.
+``three-room`` with ``boulder_phases=True`` (seventeen phases, the study's six renumbered 17,
+16, 15, 13, 7, 1): 1 the full task; 2 the agent in room 0, 2-4 units from the boulder of doorway
+0-1; 3 in room 0 facing that boulder within reach; 4 in room 0 holding it; 5 in room 0 with
+doorway 0-1 cleared; 6 in room 1 holding the boulder of doorway 0-1; 7 the study's phase 2; 8 in
+room 1, 2-4 units from the boulder of doorway 1-2 (doorway 0-1 cleared); 9 in room 1 facing that
+boulder within reach; 10 in room 1 holding it; 11 in room 1 with both doorways cleared; 12 in
+room 2 holding the boulder of doorway 1-2; 13 the study's phase 3; 14 in room 2, 2-4 units from
+the kit (both doorways cleared); 15-17 the study's phases 4-6.
 """
 
 from __future__ import annotations
@@ -60,6 +61,7 @@ class Phase:
     holding_boulder: bool = False   # the next blocked doorway's boulder is in the agent's hand
     near_boulder: bool = False      # the agent starts a few steps from the next blocked doorway
     near_kit: bool = False          # the agent starts a few steps from the kit
+    facing_boulder: bool = False    # the agent faces the next blocked doorway's boulder, in reach
 
 
 PHASES = {
@@ -84,34 +86,38 @@ TWO_ROOM_PHASES = {
     5: Phase(1, 1, False),
     6: Phase(1, 1, True),
 }
-# three-room with ``boulder_phases=True``: the study's six phases (here 15, 14, 13, 11, 6, 1) with
-# four steps inserted before each phase that must clear a doorway (as two-room's phases 4-2: the
-# doorway already cleared, its boulder in hand, a start a few steps from it; and, first, the
-# boulder in hand one room further on), and a start a few steps from the kit before the first
-# phase that must take it. Each fixes a stall seen in a run (docs/three_room.md): without the
-# near-kit phase the agent that had only ever started with the kit in hand left room 2 without
-# it; without the cleared-doorway phases the step to "room 1 holding the boulder of doorway 1-2"
-# asked for two new skills at once and never passed; and an agent that takes a boulder carries
-# it through the doorway it cleared (nothing stops it) and then did not know how to let go of it
-# next to the kit (it wandered room 2 holding it for hundreds of steps), hence the phases that
-# start in the next room with the boulder still in hand.
-THREE_ROOM_BOULDER_PHASES = {
-    1: Phase(0, 0, False),
-    2: Phase(0, 0, False, near_boulder=True),
-    3: Phase(0, 0, False, holding_boulder=True),
-    4: Phase(0, 1, False),
-    5: Phase(1, 0, False, holding_boulder=True),
-    6: Phase(1, 1, False),
-    7: Phase(1, 1, False, near_boulder=True),
-    8: Phase(1, 1, False, holding_boulder=True),
-    9: Phase(1, 2, False),
-    10: Phase(2, 1, False, holding_boulder=True),
-    11: Phase(2, 2, False),
-    12: Phase(2, 2, False, near_kit=True),
-    13: Phase(2, 2, True),
-    14: Phase(1, 2, True),
-    15: Phase(0, 2, True),
-}
+# three-room with ``boulder_phases=True``: the study's six phases (here 17, 16, 15, 13, 7, 1) with
+# five steps inserted before each phase that must clear a doorway (as two-room's phases 4-2: the
+# doorway already cleared, its boulder in hand, a start facing it within reach, a start a few
+# steps from it; and, first, the boulder in hand one room further on), and a start a few steps
+# from the kit before the first phase that must take it. Each fixes a stall seen in a run
+# (docs/three_room.md): without the near-kit phase the agent that had only ever started with the
+# kit in hand left room 2 without it; without the cleared-doorway phases the step to "room 1
+# holding the boulder of doorway 1-2" asked for two new skills at once and never passed; an agent
+# that takes a boulder carries it through the doorway it cleared (nothing stops it) and then did
+# not know how to let go of it next to the kit (it wandered room 2 holding it for hundreds of
+# steps), hence the phases that start in the next room with the boulder still in hand; and an
+# agent that started 2-4 units from a boulder it had only ever held turned away from it (two runs
+# sat 36 minutes there), hence the start facing it, one press of action 4 from holding it.
+
+
+def _doorway_phases(door: int) -> list[Phase]:
+    """The starts that teach clearing doorway ``door`` of the chain (0: rooms 0-1), hardest
+    first: 2-4 units from its boulder, facing it, holding it, it cleared, holding it one room
+    further on (all in room ``door`` but the last)."""
+    return [Phase(door, door, False, near_boulder=True),
+            Phase(door, door, False, facing_boulder=True),
+            Phase(door, door, False, holding_boulder=True),
+            Phase(door, door + 1, False),
+            Phase(door + 1, door, False, holding_boulder=True)]
+
+
+THREE_ROOM_BOULDER_PHASES = dict(enumerate(
+    [Phase(0, 0, False)] + _doorway_phases(0)                      # 1 the full task, 2-6
+    + [Phase(1, 1, False)] + _doorway_phases(1)                    # 7 the study's 2, 8-12
+    + [Phase(2, 2, False), Phase(2, 2, False, near_kit=True),      # 13 the study's 3, 14
+       Phase(2, 2, True), Phase(1, 2, True), Phase(0, 2, True)],   # 15-17 the study's 4-6
+    start=1))
 NEAR_BOULDER = (2.0, 4.0)   # distance of the agent from the boulder (or kit) it starts near
 TASK_PHASES = {"two-room": TWO_ROOM_PHASES, "three-room": PHASES}
 BOULDER_PHASES = {"three-room": THREE_ROOM_BOULDER_PHASES}
@@ -152,7 +158,7 @@ def _populate(env: MineRescueEnv, boulders, kit_room: int, miner_room: int) -> N
     """Place miner, kit and agent: the full task (agent in room 0), or a curriculum phase."""
     if env.phase is None or env.phase == 1:
         agent, kit, miner = env.start_rooms(fixed=(0, kit_room, miner_room))
-        carrying, near, near_kit = False, None, False
+        carrying, near, near_kit, facing = False, None, False, None
     else:
         phase = phase_table(env.task, env.boulder_phases)[env.phase]
         agent, kit, miner, carrying = phase.agent_room, kit_room, miner_room, phase.carrying_kit
@@ -162,13 +168,16 @@ def _populate(env: MineRescueEnv, boulders, kit_room: int, miner_room: int) -> N
             env.carrying = boulders[phase.boulders_aside]
         near = boulders[phase.boulders_aside] if phase.near_boulder else None
         near_kit = phase.near_kit
+        facing = boulders[phase.boulders_aside] if phase.facing_boulder else None
     env.place(MINER, miner)
     if carrying:
         env.carrying = env.add(Entity(KIT))
     else:
         placed = env.place(KIT, kit)
         near = placed if near_kit else near
-    if near is not None:
+    if facing is not None:
+        env.place_agent_facing(agent, facing)
+    elif near is not None:
         env.place_agent_near(agent, near, *NEAR_BOULDER)
     else:
         env.place_agent(agent)
@@ -221,19 +230,21 @@ class MineRescueEnv(MineEnv):
         placement: "fixed" or "any-room" (domain randomisation of the start rooms).
         phase: curriculum phase 1..6 of ``three-room`` or 1..6 of ``two-room`` (1 = the full
             task), or None.
-        boulder_phases: ``three-room`` only: phases 1..15, the six with starts near each
-            blocked doorway, holding its boulder (in its room and in the next), with it cleared,
-            and near the kit inserted (see ``phase_table``).
+        boulder_phases: ``three-room`` only: phases 1..17, the six with starts near each
+            blocked doorway, facing its boulder, holding it (in its room and in the next), with
+            it cleared, and near the kit inserted (see ``phase_table``).
         render_mode: None or "rgb_array" (first-person view and map side by side).
         randomise_visuals: draw the light level, the wall colour and the field of view anew each
             episode (visual domain randomisation; the layout of a seed does not change).
+        room_colours: each room's floor in a colour of its own, by room index (the rooms are
+            otherwise alike, and the view through a doorway then shows which room lies beyond).
     """
 
     def __init__(self, task: str = "two-room", num_rooms: int | None = None,
                  room_size: float = 16.0, max_episode_steps: int | None = None,
                  placement: str = "fixed", phase: int | None = None,
                  render_mode: str | None = None, randomise_visuals: bool = False,
-                 boulder_phases: bool = False):
+                 boulder_phases: bool = False, room_colours: bool = False):
         if task not in TASKS:
             raise ValueError(f"unknown task {task!r}; choose one of {', '.join(TASKS)}")
         spec = TASKS[task]
@@ -257,7 +268,8 @@ class MineRescueEnv(MineEnv):
             phase_table(task, True)   # raises for a task without them
         self.boulder_phases = bool(boulder_phases)
         self.phase = _check_phase(task, placement, phase, self.boulder_phases)
-        super().__init__(max_episode_steps, room_size, render_mode, randomise_visuals)
+        super().__init__(max_episode_steps, room_size, render_mode, randomise_visuals,
+                         room_colours)
 
     def _generate(self) -> None:
         TASKS[self.task].generate(self)

@@ -8,6 +8,10 @@ Two kinds (``--curriculum``):
   episodes starts in an easier phase already passed (see :meth:`Curriculum.review_phase`);
   with ``curriculum_dr`` > 0 a share starts as the full task with random rooms (domain
   randomisation; recorded as phase 0).
+- ``uniform`` (two-room and three-room): every episode starts in a phase drawn uniformly from the
+  task's table, the full task included, from the first episode on, with no switches (a reverse
+  curriculum without its waits: all phases learn at once, as under domain randomisation);
+  ``phase`` stays 1 and ``phase_return`` is the full task's episodes' return.
 - ``schedule`` (the rooms task): ``num_rooms`` follows the room counts of the schedule, each for
   an equal share of the updates.
 
@@ -20,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dqn_mine.config import Config
+from dqn_mine.config import PHASED_CURRICULA, Config
 from dqn_mine.env.tasks import TASKS, phase_table
 from dqn_mine.metrics import LOW_EPSILON, Rolling
 
@@ -42,10 +46,10 @@ class Curriculum:
         self.seen_phase, self.played_steps, self.review_steps = None, 0, 0
         self.rooms_schedule = tuple(cfg.rooms_schedule)
         self.total_updates = cfg.updates
-        self.easiest = (max(phase_table(cfg.task, cfg.boulder_phases))
-                        if self.kind == "adaptive" else 0)
-        # adaptive: the current phase (1 = the full task); 0 without the adaptive curriculum
-        self.phase = self.easiest if phase is None or self.kind != "adaptive" else int(phase)
+        self.phased = self.kind in PHASED_CURRICULA
+        self.easiest = max(phase_table(cfg.task, cfg.boulder_phases)) if self.phased else 0
+        # adaptive: the current phase (1 = the full task); uniform: 1; 0 without phases
+        self.phase = self._start_phase(phase)
         # schedule: the current room count; None without the schedule
         self.num_rooms: int | None = None
         self.window = cfg.curriculum_window
@@ -55,6 +59,13 @@ class Curriculum:
         self.returns = Rolling(self.window)             # current phase's episodes only
         self.low_eps_returns = Rolling(self.window)     # those of them at epsilon <= LOW_EPSILON
         self._follow_schedule(updates)
+
+    def _start_phase(self, resumed: int | None) -> int:
+        if self.kind == "uniform":
+            return 1
+        if self.kind != "adaptive" or resumed is None:
+            return self.easiest
+        return int(resumed)
 
     # -- the runner's side ---------------------------------------------------------------------
     def record(self, phase: int, ret: float, epsilon: float = float("nan")) -> None:
@@ -87,12 +98,12 @@ class Curriculum:
     @property
     def phase_return(self) -> float:
         """Rolling mean return of the current phase (NaN without the adaptive curriculum)."""
-        return self.returns.mean if self.kind == "adaptive" else float("nan")
+        return self.returns.mean if self.phased else float("nan")
 
     @property
     def phase_low_eps_return(self) -> float:
         """The same over the current phase's episodes at epsilon <= LOW_EPSILON (NaN if none)."""
-        return self.low_eps_returns.mean if self.kind == "adaptive" else float("nan")
+        return self.low_eps_returns.mean if self.phased else float("nan")
 
     @property
     def logged_phase(self) -> int:
@@ -103,12 +114,13 @@ class Curriculum:
     def episode_start(self, phase: int, num_rooms: int, rng: np.random.Generator) -> tuple:
         """(phase recorded with the episode, environment settings) for an episode that starts
         while the shared state says ``phase`` and ``num_rooms``."""
-        if self.kind == "adaptive":
+        if self.phased:
             if phase != self.seen_phase:
                 self.seen_phase, self.played_steps, self.review_steps = phase, 0, 0
             if self.dr_share and rng.random() < self.dr_share:
                 return DR_PHASE, self.dr_settings()
-            phase = self.review_phase(phase, rng)
+            phase = (int(rng.integers(1, self.easiest + 1)) if self.kind == "uniform"
+                     else self.review_phase(phase, rng))
             return phase, self.phase_settings(phase)
         if self.kind == "schedule":
             return phase, {"num_rooms": num_rooms}

@@ -37,6 +37,8 @@ def env_kwargs(cfg: Config, **override) -> dict:
                   max_episode_steps=cfg.max_episode_steps, placement=cfg.placement,
                   randomise_visuals=cfg.visual_randomisation)
     kwargs.update(override)
+    if cfg.room_colours:
+        kwargs["room_colours"] = True
     if cfg.boulder_phases and kwargs["task"] == "three-room":   # not for another eval task
         kwargs["boulder_phases"] = True
     if kwargs["task"] == "rooms":  # the other tasks have a fixed room count
