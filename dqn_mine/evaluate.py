@@ -41,6 +41,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--video-of", choices=VIDEO_OF, default="first",
                     help="which episode --video records: the first, or the first delivered "
                          "(none delivered: no video)")
+    ap.add_argument("--video-stride", type=int, default=1,
+                    help="keep every Nth frame of the video, and the last (a 2,000-step "
+                         "episode is a GIF of ~25 MB at 1)")
     ap.add_argument("--out", default=None, help="eval.json path (default: next to the checkpoint)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     return ap
@@ -104,12 +107,22 @@ def evaluate(env, agent, episodes: int, seed: int, progress: bool = True,
             "video_seed": filmed_seed}, filmed
 
 
+def every_nth(frames: list, n: int) -> list:
+    """Frames 0, n, 2n, ... and the last one (the delivery) in any case."""
+    kept = frames[::n]
+    if (len(frames) - 1) % n:
+        kept.append(frames[-1])
+    return kept
+
+
 def check_settings(args: argparse.Namespace) -> None:
     if args.episodes < 1:
         raise ValueError(f"--episodes must be at least 1, got {args.episodes}")
     check_episode_settings(args)
     if args.video:
         check_video_path(Path(args.video), "--video")
+    if args.video_stride < 1:
+        raise ValueError(f"--video-stride must be at least 1, got {args.video_stride}")
 
 
 def output_path(args: argparse.Namespace) -> Path:
@@ -136,7 +149,7 @@ def main(argv=None) -> int:
         scores, frames = evaluate(env, agent, args.episodes, args.seed, progress=not args.quiet,
                                   video_of=args.video_of if args.video else None)
         if frames:
-            save_video(frames, Path(args.video), 15.0)
+            save_video(every_nth(frames, args.video_stride), Path(args.video), 15.0)
     finally:
         env.close()
     scores.update(task=args.task, epsilon=args.epsilon, unstick=args.unstick,

@@ -56,7 +56,7 @@ def test_three_room_preset_starts_at_the_easiest_boulder_phase_and_its_envs_know
     cfg = parse_args(["--preset", "cpu-three-room"])
     assert (cfg.task, cfg.boulder_phases, cfg.curriculum) == ("three-room", True, "adaptive")
     assert (cfg.curriculum_review, cfg.curriculum_review_unit) == (0.5, "steps")
-    assert Curriculum(cfg).phase == 17
+    assert Curriculum(cfg).phase == 18
     assert actor_specs(cfg)[0].env_kwargs["boulder_phases"] is True
     assert eval_env_kwargs(cfg)["boulder_phases"] is True    # harmless: it plays phase 1
     other = parse_args(["--preset", "cpu-three-room", "--eval-task", "two-room"])
@@ -336,12 +336,12 @@ def test_uniform_curriculum_draws_every_phase_alike_and_never_switches():
     cfg = parse_args(["--preset", "cpu-three-room", "--curriculum", "uniform",
                       "--curriculum-window", "3", "--curriculum-steps", "1000"])
     cur, rng = Curriculum(cfg), np.random.default_rng(0)
-    assert (cur.phase, cur.easiest, cur.logged_phase) == (1, 17, 1)
-    starts = [cur.episode_start(cur.phase, 0, rng) for _ in range(17_000)]
-    counts = np.bincount([phase for phase, _ in starts], minlength=18)[1:]
+    assert (cur.phase, cur.easiest, cur.logged_phase) == (1, 18, 1)
+    starts = [cur.episode_start(cur.phase, 0, rng) for _ in range(18_000)]
+    counts = np.bincount([phase for phase, _ in starts], minlength=19)[1:]
     assert counts.min() > 850 and counts.max() < 1150      # 1,000 each, +-4.7 sigma
     limits = {phase: s["max_episode_steps"] for phase, s in starts}
-    assert limits[1] == 2000 and {limits[p] for p in range(2, 18)} == {1000}
+    assert limits[1] == 2000 and {limits[p] for p in range(2, 19)} == {1000}
     for ret in (1.0, 1.0, 1.0, 1.0):
         cur.record(1, ret)         # the full task's episodes make phase_return
     cur.record(7, 0.0)

@@ -103,6 +103,10 @@ def test_phase_starts_as_specified(task, boulder, phase, kit_room, miner_room):
         if want.facing_boulder:  # one press of action 4 takes that boulder
             boulder = [e for e in env.world_entities() if e.kind == BOULDER][cleared]
             assert env.facing() is boulder
+        if want.facing_kit:      # one press of action 4 takes the kit, which is in view
+            assert env.facing() is env.kit
+            obs = env.step(5)[0].astype(int)      # no-op: the start's frame
+            assert ((obs[0] > 150) & (obs[1] < 60) & (obs[2] < 60)).sum() >= 10
         if want.near_kit:
             assert 2.0 <= math.dist((env.agent_x, env.agent_z), (env.kit.x, env.kit.z)) <= 4.0
     env.close()
@@ -119,7 +123,10 @@ def test_harder_phases_need_more_expert_steps(task, boulder):
         means[phase] = statistics.mean(expert_episode(env, s)[1] for s in range(8))
         env.close()
     order = [means[p] for p in sorted(phases, reverse=True)]   # easiest first
-    assert order == sorted(order), means
+    # A start facing an item is one press of action 4 from holding it, where the next easier
+    # phase starts (from another random spot): the two may swap by a step or two.
+    assert all(a <= b + 2 for a, b in zip(order, order[1:])), means
+    assert order[0] < order[-1] / 5, means
 
 
 @pytest.mark.parametrize("config", [dict(task="two-room"), dict(task="three-room"),

@@ -101,6 +101,7 @@ def test_outcomes_say_what_the_agent_held_at_the_end():
     (["--episodes", "0"], "--episodes must be at least 1"),
     (["--epsilon", "2"], "--epsilon must be in [0, 1]"),
     (["--video", "x.avi"], "--video must name a .gif or .mp4"),
+    (["--video-stride", "0"], "--video-stride must be at least 1"),
 ])
 def test_bad_evaluate_flags_are_one_line(run_dir, argv, fragment):
     res = evaluate(str(run_dir), *argv)
@@ -152,3 +153,11 @@ def test_video_of_delivered_films_the_first_delivered_episode_and_keeps_the_scor
     assert scores["video_seed"] == 11 and 2 < len(frames) < 61          # delivered sooner
     assert frames[0].ndim == 3 and frames[0].shape[2] == 3
     assert not np.array_equal(frames[0], frames[-1])
+
+
+@pytest.mark.parametrize("count,n,kept", [(10, 1, list(range(10))), (10, 3, [0, 3, 6, 9]),
+                                          (11, 3, [0, 3, 6, 9, 10]), (1, 4, [0])])
+def test_video_stride_keeps_every_nth_frame_and_the_last(count, n, kept):
+    from dqn_mine.evaluate import every_nth
+
+    assert every_nth(list(range(count)), n) == kept

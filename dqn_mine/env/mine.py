@@ -420,11 +420,11 @@ class MineEnv(gym.Env):
                                                        ring=(item, near, far))
         self.heading = self._rng.randrange(HEADINGS)
 
-    def place_agent_facing(self, room: int, item: Entity) -> None:
-        """The agent in ``room`` just clear of ``item``, facing it: one press of action 4 takes
-        it. The heading is drawn among those that allow this (from a doorway's boulder: the
-        half-circle on ``room``'s side)."""
-        dist = AGENT_RADIUS + item.radius + 0.1
+    def place_agent_facing(self, room: int, item: Entity, dist: float | None = None) -> None:
+        """The agent in ``room``, ``dist`` from ``item``'s centre (default: just clear of it),
+        facing it: one press of action 4 takes it. The heading is drawn among those that allow
+        this (from a doorway's boulder: the half-circle on ``room``'s side)."""
+        dist = AGENT_RADIUS + item.radius + 0.1 if dist is None else dist
         others = [e for e in self.entities if e is not item and e is not self.carrying]
         for heading in self._rng.sample(range(HEADINGS), HEADINGS):
             x, z = item.x - dist * _COS[heading], item.z - dist * _SIN[heading]

@@ -27,14 +27,15 @@ has phases 1-6 built the same way (see ``TWO_ROOM_PHASES`` and below):
 in room 0 holding that boulder; 4 the doorway cleared; 5 the agent in room 1 (the one-room problem
 there); 6 the agent in room 1 carrying the kit.
 
-``three-room`` with ``boulder_phases=True`` (seventeen phases, the study's six renumbered 17,
-16, 15, 13, 7, 1): 1 the full task; 2 the agent in room 0, 2-4 units from the boulder of doorway
+``three-room`` with ``boulder_phases=True`` (eighteen phases, the study's six renumbered 18,
+17, 16, 13, 7, 1): 1 the full task; 2 the agent in room 0, 2-4 units from the boulder of doorway
 0-1; 3 in room 0 facing that boulder within reach; 4 in room 0 holding it; 5 in room 0 with
 doorway 0-1 cleared; 6 in room 1 holding the boulder of doorway 0-1; 7 the study's phase 2; 8 in
 room 1, 2-4 units from the boulder of doorway 1-2 (doorway 0-1 cleared); 9 in room 1 facing that
 boulder within reach; 10 in room 1 holding it; 11 in room 1 with both doorways cleared; 12 in
 room 2 holding the boulder of doorway 1-2; 13 the study's phase 3; 14 in room 2, 2-4 units from
-the kit (both doorways cleared); 15-17 the study's phases 4-6.
+the kit (both doorways cleared); 15 facing the kit in reach and in view; 16-18 the study's phases
+4-6.
 """
 
 from __future__ import annotations
@@ -62,6 +63,7 @@ class Phase:
     near_boulder: bool = False      # the agent starts a few steps from the next blocked doorway
     near_kit: bool = False          # the agent starts a few steps from the kit
     facing_boulder: bool = False    # the agent faces the next blocked doorway's boulder, in reach
+    facing_kit: bool = False        # the agent faces the kit, in reach and in view
 
 
 PHASES = {
@@ -86,11 +88,11 @@ TWO_ROOM_PHASES = {
     5: Phase(1, 1, False),
     6: Phase(1, 1, True),
 }
-# three-room with ``boulder_phases=True``: the study's six phases (here 17, 16, 15, 13, 7, 1) with
+# three-room with ``boulder_phases=True``: the study's six phases (here 18, 17, 16, 13, 7, 1) with
 # five steps inserted before each phase that must clear a doorway (as two-room's phases 4-2: the
 # doorway already cleared, its boulder in hand, a start facing it within reach, a start a few
-# steps from it; and, first, the boulder in hand one room further on), and a start a few steps
-# from the kit before the first phase that must take it. Each fixes a stall seen in a run
+# steps from it; and, first, the boulder in hand one room further on), and starts facing the kit
+# and a few steps from it before the first phase that must take it. Each fixes a stall seen in a run
 # (docs/three_room.md): without the near-kit phase the agent that had only ever started with the
 # kit in hand left room 2 without it; without the cleared-doorway phases the step to "room 1
 # holding the boulder of doorway 1-2" asked for two new skills at once and never passed; an agent
@@ -98,7 +100,10 @@ TWO_ROOM_PHASES = {
 # not know how to let go of it next to the kit (it wandered room 2 holding it for hundreds of
 # steps), hence the phases that start in the next room with the boulder still in hand; and an
 # agent that started 2-4 units from a boulder it had only ever held turned away from it (two runs
-# sat 36 minutes there), hence the start facing it, one press of action 4 from holding it.
+# sat 36 minutes there), hence the start facing it, one press of action 4 from holding it. The
+# kit within reach is mostly below the view (the floor in view begins 2.6 units ahead): the
+# start facing it is placed where it still shows, and an agent that carries it home 8 times in 8
+# took it in 2 of 8 starts a few steps away.
 
 
 def _doorway_phases(door: int) -> list[Phase]:
@@ -116,9 +121,14 @@ THREE_ROOM_BOULDER_PHASES = dict(enumerate(
     [Phase(0, 0, False)] + _doorway_phases(0)                      # 1 the full task, 2-6
     + [Phase(1, 1, False)] + _doorway_phases(1)                    # 7 the study's 2, 8-12
     + [Phase(2, 2, False), Phase(2, 2, False, near_kit=True),      # 13 the study's 3, 14
-       Phase(2, 2, True), Phase(1, 2, True), Phase(0, 2, True)],   # 15-17 the study's 4-6
+       Phase(2, 2, False, facing_kit=True),                        # 15
+       Phase(2, 2, True), Phase(1, 2, True), Phase(0, 2, True)],   # 16-18 the study's 4-6
     start=1))
 NEAR_BOULDER = (2.0, 4.0)   # distance of the agent from the boulder (or kit) it starts near
+# Facing the kit: 1.75 units centre to centre, inside action 4's reach (to 1.95) and far enough
+# for the kit to show in the bottom rows of the view (~20 red pixels; none within 1.3 units,
+# where the floor in view begins beyond it).
+KIT_FACING_DISTANCE = 1.75
 TASK_PHASES = {"two-room": TWO_ROOM_PHASES, "three-room": PHASES}
 BOULDER_PHASES = {"three-room": THREE_ROOM_BOULDER_PHASES}
 
@@ -158,7 +168,7 @@ def _populate(env: MineRescueEnv, boulders, kit_room: int, miner_room: int) -> N
     """Place miner, kit and agent: the full task (agent in room 0), or a curriculum phase."""
     if env.phase is None or env.phase == 1:
         agent, kit, miner = env.start_rooms(fixed=(0, kit_room, miner_room))
-        carrying, near, near_kit, facing = False, None, False, None
+        carrying, near, near_kit, facing, facing_kit = False, None, False, None, False
     else:
         phase = phase_table(env.task, env.boulder_phases)[env.phase]
         agent, kit, miner, carrying = phase.agent_room, kit_room, miner_room, phase.carrying_kit
@@ -169,12 +179,16 @@ def _populate(env: MineRescueEnv, boulders, kit_room: int, miner_room: int) -> N
         near = boulders[phase.boulders_aside] if phase.near_boulder else None
         near_kit = phase.near_kit
         facing = boulders[phase.boulders_aside] if phase.facing_boulder else None
+        facing_kit = phase.facing_kit
     env.place(MINER, miner)
     if carrying:
         env.carrying = env.add(Entity(KIT))
     else:
         placed = env.place(KIT, kit)
         near = placed if near_kit else near
+        if facing_kit:
+            env.place_agent_facing(agent, placed, KIT_FACING_DISTANCE)
+            return
     if facing is not None:
         env.place_agent_facing(agent, facing)
     elif near is not None:
@@ -230,9 +244,9 @@ class MineRescueEnv(MineEnv):
         placement: "fixed" or "any-room" (domain randomisation of the start rooms).
         phase: curriculum phase 1..6 of ``three-room`` or 1..6 of ``two-room`` (1 = the full
             task), or None.
-        boulder_phases: ``three-room`` only: phases 1..17, the six with starts near each
+        boulder_phases: ``three-room`` only: phases 1..18, the six with starts near each
             blocked doorway, facing its boulder, holding it (in its room and in the next), with
-            it cleared, and near the kit inserted (see ``phase_table``).
+            it cleared, and near and facing the kit inserted (see ``phase_table``).
         render_mode: None or "rgb_array" (first-person view and map side by side).
         randomise_visuals: draw the light level, the wall colour and the field of view anew each
             episode (visual domain randomisation; the layout of a seed does not change).
