@@ -129,6 +129,7 @@ NEAR_BOULDER = (2.0, 4.0)   # distance of the agent from the boulder (or kit) it
 # for the kit to show in the bottom rows of the view (~20 red pixels; none within 1.3 units,
 # where the floor in view begins beyond it).
 KIT_FACING_DISTANCE = 1.75
+FULL_TASK = PHASES[1]        # phase 1 of every table: no boulder moved, no item in hand
 TASK_PHASES = {"two-room": TWO_ROOM_PHASES, "three-room": PHASES}
 BOULDER_PHASES = {"three-room": THREE_ROOM_BOULDER_PHASES}
 
@@ -168,33 +169,35 @@ def _populate(env: MineRescueEnv, boulders, kit_room: int, miner_room: int) -> N
     """Place miner, kit and agent: the full task (agent in room 0), or a curriculum phase."""
     if env.phase is None or env.phase == 1:
         agent, kit, miner = env.start_rooms(fixed=(0, kit_room, miner_room))
-        carrying, near, near_kit, facing, facing_kit = False, None, False, None, False
+        phase = FULL_TASK
     else:
         phase = phase_table(env.task, env.boulder_phases)[env.phase]
-        agent, kit, miner, carrying = phase.agent_room, kit_room, miner_room, phase.carrying_kit
+        agent, kit, miner = phase.agent_room, kit_room, miner_room
         for boulder, door in list(zip(boulders, env.layout.doors))[:phase.boulders_aside]:
             env.move_aside(boulder, door)
         if phase.holding_boulder:
             env.carrying = boulders[phase.boulders_aside]
-        near = boulders[phase.boulders_aside] if phase.near_boulder else None
-        near_kit = phase.near_kit
-        facing = boulders[phase.boulders_aside] if phase.facing_boulder else None
-        facing_kit = phase.facing_kit
     env.place(MINER, miner)
-    if carrying:
+    if phase.carrying_kit:
         env.carrying = env.add(Entity(KIT))
     else:
-        placed = env.place(KIT, kit)
-        near = placed if near_kit else near
-        if facing_kit:
-            env.place_agent_facing(agent, placed, KIT_FACING_DISTANCE)
-            return
-    if facing is not None:
-        env.place_agent_facing(agent, facing)
-    elif near is not None:
-        env.place_agent_near(agent, near, *NEAR_BOULDER)
+        env.place(KIT, kit)
+    _place_agent(env, agent, phase, boulders)
+
+
+def _place_agent(env: MineRescueEnv, room: int, phase: Phase, boulders) -> None:
+    """The agent in ``room``, where ``phase`` starts it: facing or near the kit or the next
+    blocked doorway's boulder, else anywhere."""
+    if phase.facing_kit:
+        env.place_agent_facing(room, env.kit, KIT_FACING_DISTANCE)
+    elif phase.facing_boulder:
+        env.place_agent_facing(room, boulders[phase.boulders_aside])
+    elif phase.near_kit:
+        env.place_agent_near(room, env.kit, *NEAR_BOULDER)
+    elif phase.near_boulder:
+        env.place_agent_near(room, boulders[phase.boulders_aside], *NEAR_BOULDER)
     else:
-        env.place_agent(agent)
+        env.place_agent(room)
 
 
 def _rooms(env: MineRescueEnv) -> None:
