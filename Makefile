@@ -50,11 +50,12 @@ clean:
 # | cpu (the study's full-size task on 2 CPU cores, under 3 hours; exploration and scaling only)
 # | auto (the default: paper on a CUDA machine, else quick).
 # SEEDS=N runs seeds 0..N-1 (default: the grid's for the scale); JOBS=J runs at a time (never more
-# busy processes than cores). Re-running the same command skips finished runs and resumes
+# busy processes than cores); CONFIGS="A B" runs only those configurations. Re-running the same command skips finished runs and resumes
 # interrupted ones. Output: $(OUT)summary.csv, report.md and PNG plots.
 GRID  ?= ablation
 SCALE ?= auto
 SEEDS ?=
+CONFIGS ?=
 JOBS  ?= 1
 OUT   ?= results/$(GRID)/
 
@@ -63,7 +64,7 @@ OUT   ?= results/$(GRID)/
 sweep: install
 	$(PY) -m pip install -q -e ".[plot]"
 	$(PY) -m experiments run $(GRID) --scale $(SCALE) --out $(OUT) --jobs $(JOBS) \
-		$(if $(SEEDS),--seeds $(SEEDS))
+		$(if $(SEEDS),--seeds $(SEEDS)) $(if $(CONFIGS),--configs $(CONFIGS))
 
 ablation:
 	$(MAKE) sweep GRID=ablation

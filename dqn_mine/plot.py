@@ -6,10 +6,10 @@ the evaluation actor, against network updates and against wall time;
 a curriculum run gets its phase (or room count) in a third panel. Needs matplotlib (the ``plot``
 extra). ``--milestones 0.5 0.9`` prints instead when each run's full-task rolling return first
 reached each level (updates and minutes), as a markdown table; ``--phases`` when each run
-entered each curriculum phase. ``--band`` treats the runs as seeds of one configuration and
-draws their full-task rolling return as a median with a min-max band (0 until a curriculum run
-reaches the full task). Sweeps over many runs and seeds have their own plots:
-``python -m experiments report``.
+entered each curriculum phase, how long it stayed and its mean rolling return there.
+``--band`` treats the runs as seeds of one configuration and draws their full-task rolling
+return as a median with a min-max band (0 until a curriculum run reaches the full task). Sweeps
+over many runs and seeds have their own plots: ``python -m experiments report``.
 """
 
 from __future__ import annotations
@@ -134,6 +134,44 @@ def phase_table(runs: dict) -> str:
     return "\n".join(lines)
 
 
+def phase_stays(rows: list[dict]) -> list[tuple]:
+    """(phase, minutes entered, minutes there, mean rolling return there, the same at epsilon <=
+    0.01) for each stay in a phase, in order: the mean over the log rows while in it, which
+    varies far less between runs than when a phase is passed (a lucky window decides that)."""
+    stays: list[list] = []
+    for r in rows:
+        phase = r.get("phase", math.nan)
+        if math.isnan(phase):
+            continue
+        if not stays or stays[-1][0] != int(phase):
+            stays.append([int(phase), r["wall_time"] / 60, []])
+        stays[-1][2].append(r)
+    ends = [s[1] for s in stays[1:]] + [rows[-1]["wall_time"] / 60] if stays else []
+    return [(phase, start, end - start, _mean(column(there, "phase_return")),
+             _mean(column(there, "phase_low_eps_return")))
+            for (phase, start, there), end in zip(stays, ends)]
+
+
+def _mean(values: list[float]) -> float:
+    kept = [v for v in values if not math.isnan(v)]
+    return sum(kept) / len(kept) if kept else math.nan
+
+
+def stay_table(runs: dict) -> str:
+    """Markdown: one row per stay of each run in a phase (``phase_stays``)."""
+    lines = ["| run | phase | entered (min) | minutes there | mean rolling return there | "
+             f"the same at epsilon <= {LOW_EPSILON} |", "|---|---:|---:|---:|---:|---:|"]
+    for label, rows in runs.items():
+        for phase, start, there, mean, low in phase_stays(rows):
+            lines.append(f"| {label} | {phase} | {start:.1f} | {there:.1f} | "
+                         f"{_num(mean)} | {_num(low)} |")
+    return "\n".join(lines)
+
+
+def _num(value: float) -> str:
+    return "-" if math.isnan(value) else f"{value:.2f}"
+
+
 def _last(points: list[tuple]) -> str:
     """The last point's return, 2 decimals ("-" with none or NaN)."""
     return f"{points[-1][2]:.2f}" if points and not math.isnan(points[-1][2]) else "-"
@@ -251,7 +289,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="print when the full-task rolling return first reached each level "
                          "instead of plotting")
     ap.add_argument("--phases", action="store_true",
-                    help="print when each run entered each curriculum phase instead of plotting")
+                    help="print when each run entered each curriculum phase, how long it "
+                         "stayed and its mean rolling return there, instead of plotting")
     ap.add_argument("--band", action="store_true",
                     help="the runs are seeds of one configuration: plot their full-task "
                          "rolling return as median and min-max band")
@@ -265,7 +304,7 @@ def main(argv: list[str] | None = None) -> int:
             print(milestone_table(runs, configs, args.milestones))
             return 0
         if args.phases:
-            print(phase_table(runs))
+            print(phase_table(runs) + "\n\n" + stay_table(runs))
             return 0
         import matplotlib  # noqa: F401
     except ValueError as exc:

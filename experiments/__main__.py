@@ -46,6 +46,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="explicit seeds instead of --seeds")
         p.add_argument("--out", default=None, help="output folder (default: results/<grid>/)")
         if name == "run":
+            p.add_argument("--configs", nargs="+", default=None, metavar="NAME",
+                           help="run only these configurations (default: all of the grid's; "
+                                "the report still lists every one)")
             p.add_argument("--jobs", type=int, default=1,
                            help="runs at a time, never more busy processes than cores unless a "
                                 "run alone needs more (default: 1)")
@@ -76,6 +79,16 @@ def seeds_of(args, grid) -> list[int]:
     return list(range(n))
 
 
+def only_configs(specs: list, names: Sequence[str], known: Sequence[str]) -> list:
+    """The runs of the named configurations, in the order named (a sweep split over sessions
+    or machines, the most telling first)."""
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise ConfigError(f"--configs: unknown configuration {unknown[0]!r} "
+                          f"(choose from {', '.join(known)})")
+    return [spec for name in dict.fromkeys(names) for spec in specs if spec.config_name == name]
+
+
 def cmd_list() -> int:
     for name in grid_names():
         grid = load_grid(name)
@@ -96,11 +109,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         seeds = seeds_of(args, grid)
         out = Path(args.out or f"results/{grid.name}")
         specs = grid.expand(args.scale, out, seeds)
+        if args.command == "run" and args.configs:
+            specs = only_configs(specs, args.configs, grid.config_names(args.scale))
     except ConfigError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     command = f"{PROG} run {grid.name} --scale {args.scale} --seed-list " \
               f"{' '.join(map(str, seeds))} --out {shlex.quote(str(out))}"
+    if args.command == "run" and args.configs:
+        command += " --configs " + " ".join(map(shlex.quote, dict.fromkeys(args.configs)))
     conflicts = [f"{spec.label}: {state}" for spec in specs
                  if (state := run_state(spec)).startswith("conflict")]
     if conflicts and (args.command == "report" or len(conflicts) == len(specs)):

@@ -364,3 +364,19 @@ def test_report_refuses_runs_of_another_scale(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "other settings" in err and "\n" not in err
     assert not (tmp_path / "report.md").exists()
+
+
+def test_configs_runs_a_subset_in_the_order_named(tmp_path, capsys):
+    from experiments.__main__ import main
+
+    out = tmp_path / "sweep"
+    assert main(["run", "exploration", "--scale", "cpu", "--out", str(out), "--dry-run",
+                 "--configs", "any-room", "baseline", "any-room"]) == 0
+    printed = capsys.readouterr().out
+    labels = [line.split(":")[0] for line in printed.splitlines() if not line.startswith(" ")]
+    assert labels == ["any-room/seed0", "baseline/seed0"]
+    assert "--placement any-room" in printed and not out.exists()
+    assert main(["run", "exploration", "--scale", "cpu", "--out", str(out), "--dry-run",
+                 "--configs", "baseline", "bogus"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "'bogus'" in err and "any-room" in err and "\n" not in err

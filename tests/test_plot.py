@@ -22,6 +22,16 @@ def fake_run(run_dir, phases):
     return run_dir
 
 
+def write_metrics(run_dir, rows):
+    """A run folder whose metrics.csv holds ``rows``."""
+    run_dir.mkdir()
+    metrics = MetricsTable(run_dir / "metrics.csv")
+    for row in rows:
+        metrics.write(row)
+    metrics.close()
+    return run_dir
+
+
 def png_size(path):
     from PIL import Image
 
@@ -69,37 +79,25 @@ def test_milestones_count_full_task_windows_only(tmp_path, capsys):
     plain = parse_args(["--return-window", "100"])
     assert milestones(rows, plain, (0.9,)) == {0.9: (300.0, 3.0)}
     # the command line reads each run's config.json
-    run_dir = tmp_path / "run"
-    run_dir.mkdir()
-    metrics = MetricsTable(run_dir / "metrics.csv")
-    for row in rows:
-        metrics.write(row)
-    metrics.close()
+    run_dir = write_metrics(tmp_path / "run", rows)
     (run_dir / "config.json").write_text(json.dumps(
         {"curriculum": "adaptive", "curriculum_window": 10, "curriculum_review": 0.5}))
     assert main([str(run_dir), "--milestones", "0.5", "0.9"]) == 0
     out = capsys.readouterr().out
     assert "| run | 400, 4.0 | 600, 6.0 | 0.85 |" in out
     # a run that logs the near-greedy envs' means gets their last full-task value as well
-    with_low = tmp_path / "low"
-    with_low.mkdir()
-    metrics = MetricsTable(with_low / "metrics.csv")
-    for row in rows:
-        metrics.write({**row, "low_eps_return": 0.5,
-                       "phase_low_eps_return": 0.4 * row["phase_return"]})
-    metrics.close()
+    with_low = write_metrics(tmp_path / "low", [
+        {**row, "low_eps_return": 0.5, "phase_low_eps_return": 0.4 * row["phase_return"]}
+        for row in rows])
     (with_low / "config.json").write_text((run_dir / "config.json").read_text())
     assert main([str(run_dir), str(with_low), "--milestones", "0.5"]) == 0
     out = capsys.readouterr().out
     assert "| last full-task return | last at epsilon <= 0.01 |" in out
     assert "| run | 400, 4.0 | 0.85 | - |" in out and "| low | 400, 4.0 | 0.85 | 0.34 |" in out
     # a run with an evaluation actor: when its return first reached each level, and its last
-    evaluated = tmp_path / "eval"
-    evaluated.mkdir()
-    metrics = MetricsTable(evaluated / "metrics.csv")
-    for i, row in enumerate(rows):
-        metrics.write({**row, "eval_return": [math.nan, 0.2, 0.6, math.nan, 0.4, 0.9, 0.8][i]})
-    metrics.close()
+    evals = [math.nan, 0.2, 0.6, math.nan, 0.4, 0.9, 0.8]
+    evaluated = write_metrics(tmp_path / "eval", [{**row, "eval_return": e}
+                                                  for row, e in zip(rows, evals)])
     (evaluated / "config.json").write_text((run_dir / "config.json").read_text())
     assert main([str(evaluated), "--milestones", "0.5", "0.9"]) == 0
     out = capsys.readouterr().out
@@ -132,3 +130,24 @@ def test_band_plot_of_seeds_writes_a_png(tmp_path):
     assert main([*runs, "--band", "--out", str(tmp_path / "band.png")]) == 0
     (w, h), ink = png_size(tmp_path / "band.png")
     assert w > h and ink > 5
+
+
+def test_phase_stays_by_hand(tmp_path, capsys):
+    """Each stay in a phase: when it began, how long until the next phase's first row (or the
+    last row), and its mean rolling returns, NaN rows left out."""
+    from dqn_mine.plot import phase_stays
+
+    nan = math.nan
+    # (minutes, phase, phase_return, phase_low_eps_return)
+    table = [(1, 3, 0.2, nan), (2, 3, 0.4, 0.5), (3, 2, nan, nan), (5, 2, 0.1, 0.3),
+             (6, 2, 0.3, 0.1), (7, 1, 0.9, 1.0), (10, 1, 0.7, nan)]
+    rows = [{"update": 100.0 * m, "wall_time": 60.0 * m, "phase": float(p),
+             "phase_return": r, "phase_low_eps_return": low} for m, p, r, low in table]
+    stays = phase_stays(rows)
+    assert [s[:3] for s in stays] == [(3, 1.0, 2.0), (2, 3.0, 4.0), (1, 7.0, 3.0)]
+    assert [s[3] for s in stays] == pytest.approx([0.3, 0.2, 0.8])
+    assert [s[4] for s in stays] == pytest.approx([0.5, 0.2, 1.0])
+    run_dir = write_metrics(tmp_path / "run", rows)
+    assert main([str(run_dir), "--phases"]) == 0
+    out = capsys.readouterr().out
+    assert "| run | 2 | 3.0 | 4.0 | 0.20 | 0.20 |" in out
