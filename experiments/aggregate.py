@@ -8,6 +8,10 @@ Definitions (the tests check them by hand):
   final values; std is the sample standard deviation (ddof = 1; empty for one seed);
 - ``early_return_mean`` is the mean over seeds of each seed's ``episode_return`` at the first
   logged row at or after a quarter of its last update (for "learns faster early" findings);
+- ``best_eval_return_mean`` is the mean over seeds of each seed's highest evaluation return
+  (a task learned for a while and forgotten, or learned only at the end, still shows);
+  ``hardest_phase_mean`` the mean over seeds of the hardest curriculum phase each seed reached
+  (the lowest phase number above 0; empty without a phased curriculum);
 - rate columns (``updates_per_s``, ``env_steps_per_s``) and ``sampled_reward_mean`` are the
   mean over seeds of each seed's mean over its rows; ``updates``, ``wall_time_s`` and
   ``replay_ratio`` are the mean over seeds of each seed's last value;
@@ -34,7 +38,7 @@ SUMMARY_COLUMNS = (
     "env_steps_per_s", "replay_ratio",
     "final_return_mean", "final_return_std", "final_return_min", "final_return_max",
     "final_length_mean", "final_eval_return_mean", "final_eval_return_std",
-    "early_return_mean", "sampled_reward_mean",
+    "early_return_mean", "sampled_reward_mean", "best_eval_return_mean", "hardest_phase_mean",
 )
 FINALS = {"return": "episode_return", "length": "episode_length", "eval_return": "eval_return"}
 
@@ -108,6 +112,18 @@ def early_value(run: SeedRun, col: str = "episode_return", share: float = 0.25) 
     return float(values[np.argmax(updates >= share * updates[-1])])
 
 
+def max_finite(values: np.ndarray) -> float:
+    finite = values[np.isfinite(values)]
+    return float(finite.max()) if finite.size else math.nan
+
+
+def hardest_phase(run: SeedRun) -> float:
+    """The lowest curriculum phase above 0 the run logged (NaN without phases)."""
+    phases = run.columns.get("phase", np.array([]))
+    phases = phases[np.isfinite(phases) & (phases > 0)]
+    return float(phases.min()) if phases.size else math.nan
+
+
 def mean_finite(values: np.ndarray) -> float:
     finite = values[np.isfinite(values)]
     return float(finite.mean()) if finite.size else math.nan
@@ -166,6 +182,8 @@ def summarize_config(name: str, settings: str, runs: Sequence[SeedRun]) -> dict[
                 row[key] = v
     row["early_return_mean"] = _mean([early_value(r) for r in runs])
     row["sampled_reward_mean"] = _mean([mean_finite(r.columns["sampled_reward"]) for r in runs])
+    row["best_eval_return_mean"] = _mean([max_finite(r.columns["eval_return"]) for r in runs])
+    row["hardest_phase_mean"] = _mean([hardest_phase(r) for r in runs])
     return row
 
 

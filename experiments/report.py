@@ -117,9 +117,12 @@ def render(grid: Grid, scale: str, seeds: Sequence[int], rows: list[dict],
     lines += ["", "## Results", "",
               "Final = each seed's last logged rolling mean (last 100 finished episodes), then "
               "mean ± sample std [min, max] over seeds.", ""]
+    phase_col = any(math.isfinite(r.get("hardest_phase_mean", math.nan)) for r in rows)
     head = ["config", "settings", "seeds (finished)", "final return"]
     if eval_col:
-        head.append("final eval return")
+        head += ["final eval return", "best eval return"]
+    if phase_col:
+        head.append("hardest phase reached")
     head += ["final ep. length", "updates", "wall time", "updates/s", "replay ratio",
              "sampled reward"]
     lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -127,7 +130,9 @@ def render(grid: Grid, scale: str, seeds: Sequence[int], rows: list[dict],
         cells = [f"`{r['config']}`", r["settings"], f"{r['seeds']} ({r['finished']})",
                  _final_cell(r, "return")]
         if eval_col:
-            cells.append(_final_cell(r, "eval_return"))
+            cells += [_final_cell(r, "eval_return"), _num(r["best_eval_return_mean"])]
+        if phase_col:
+            cells.append(_num(r["hardest_phase_mean"], "{:.1f}"))
         cells += [_num(r["final_length_mean"], "{:.0f}"), _num(r["updates"], "{:.0f}"),
                   _num(r["wall_time_s"] / 60 if r["seeds"] else math.nan, "{:.1f} min"),
                   _num(r["updates_per_s"], "{:.1f}"), _num(r["replay_ratio"]),

@@ -179,23 +179,23 @@ def _write_metrics(run_dir: Path, rows, exit_code=0):
     (run_dir / "summary.json").write_text(json.dumps({"exit_code": exit_code}))
 
 
-def _row(update, wall, ret, length=50, ups=10.0, ratio=0.1, sampled=0.0, ev=None):
+def _row(update, wall, ret, length=50, ups=10.0, ratio=0.1, sampled=0.0, ev=None, phase=0):
     return {"update": update, "wall_time": wall, "episode_return": ret, "episode_length": length,
             "updates_per_s": ups, "env_steps_per_s": 100.0, "replay_ratio": ratio,
-            "sampled_reward": sampled, "eval_return": ev}
+            "sampled_reward": sampled, "eval_return": ev, "phase": phase}
 
 
 def _synthetic(out: Path):
     """Two configurations; 'a' has two seeds with different logging points and an empty cell."""
     _write_metrics(out / "a" / "seed0", [
-        _row(100, 10.0, None, length=None, ups=8.0, ratio=0.20, sampled=0.0),
-        _row(200, 20.0, 0.2, length=40, ups=12.0, ratio=0.15, sampled=0.1, ev=0.0),
-        _row(300, 30.0, 0.4, length=30, ups=10.0, ratio=0.10, sampled=0.2, ev=0.5)])
+        _row(100, 10.0, None, length=None, ups=8.0, ratio=0.20, sampled=0.0, phase=3),
+        _row(200, 20.0, 0.2, length=40, ups=12.0, ratio=0.15, sampled=0.1, ev=0.7, phase=2),
+        _row(300, 30.0, 0.4, length=30, ups=10.0, ratio=0.10, sampled=0.2, ev=0.5, phase=2)])
     _write_metrics(out / "a" / "seed1", [
-        _row(150, 15.0, 0.0, length=50, ups=20.0, ratio=0.30, sampled=0.0),
-        _row(250, 35.0, 0.6, length=20, ups=20.0, ratio=0.20, sampled=0.3, ev=1.0),
+        _row(150, 15.0, 0.0, length=50, ups=20.0, ratio=0.30, sampled=0.0, phase=4),
+        _row(250, 35.0, 0.6, length=20, ups=20.0, ratio=0.20, sampled=0.3, ev=1.0, phase=3),
         # a resumed run re-logs update 250 after its last checkpoint: the later row wins
-        _row(250, 36.0, 0.8, length=10, ups=30.0, ratio=0.25, sampled=0.5, ev=1.0)],
+        _row(250, 36.0, 0.8, length=10, ups=30.0, ratio=0.25, sampled=0.5, ev=0.9, phase=3)],
         exit_code=130)
     _write_metrics(out / "b" / "seed0", [_row(100, 5.0, 0.1), _row(200, 9.0, 0.3)])
 
@@ -212,7 +212,10 @@ def test_summary_matches_hand_computation(tmp_path):
                                                              (0.8 - 0.6) ** 2) / 1))
     assert (a["final_return_min"], a["final_return_max"]) == pytest.approx((0.4, 0.8))
     assert a["final_length_mean"] == pytest.approx((30 + 10) / 2)
-    assert a["final_eval_return_mean"] == pytest.approx((0.5 + 1.0) / 2)
+    assert a["final_eval_return_mean"] == pytest.approx((0.5 + 0.9) / 2)
+    # best: seed0 0.7 (before its last 0.5), seed1 0.9 (its 1.0 was re-logged as 0.9)
+    assert a["best_eval_return_mean"] == pytest.approx((0.7 + 0.9) / 2)
+    assert a["hardest_phase_mean"] == pytest.approx((2 + 3) / 2)
     assert a["updates"] == pytest.approx((300 + 250) / 2)
     assert a["wall_time_s"] == pytest.approx((30.0 + 36.0) / 2)
     assert a["updates_per_s"] == pytest.approx(((8 + 12 + 10) / 3 + (20 + 30) / 2) / 2)
@@ -224,6 +227,7 @@ def test_summary_matches_hand_computation(tmp_path):
     assert b["final_return_mean"] == pytest.approx(0.3)
     assert math.isnan(b["final_return_std"])  # one seed: no sample std
     assert math.isnan(b["final_eval_return_mean"])
+    assert math.isnan(b["best_eval_return_mean"]) and math.isnan(b["hardest_phase_mean"])
     assert b["early_return_mean"] == pytest.approx(0.1)
 
 
@@ -257,7 +261,8 @@ def test_claims_and_report_from_synthetic_runs(tmp_path):
                 claims=(Claim("a ahead of b", "final_return_mean", "a", ">", "b"),))
     report = build_report(grid, "paper", tmp_path, [0, 1]).read_text()
     assert "a ahead of b: **yes** (a 0.600 vs b 0.300" in report
-    assert "| `a` | actors=2 | 2 (1) | 0.600 ± 0.283 [0.400, 0.800] |" in report
+    assert "| `a` | actors=2 | 2 (1) | 0.600 ± 0.283 [0.400, 0.800] | 2.5 |" in report
+    assert "| final return | hardest phase reached |" in report
     with open(tmp_path / "summary.csv", newline="") as f:
         summary = {r["config"]: r for r in csv.DictReader(f)}
     assert float(summary["a"]["final_return_mean"]) == pytest.approx(0.6)
