@@ -78,10 +78,12 @@ class Config:
                                      "in: uniform, or nearest (the phase k steps easier with "
                                      "weight 2**-k: most often the one just passed)",
                                      REVIEW_PICKS)
-    curriculum_review_unit: str = _f("episodes", "what --curriculum-review is a share of: "
-                                     "episodes (a random draw per episode), or steps (an actor "
-                                     "reviews while its review episodes played fewer than that "
-                                     "share of the steps since the last phase switch)",
+    curriculum_review_unit: str = _f("episodes", "what --curriculum-review and --curriculum-dr "
+                                     "are shares of: episodes (a random draw per episode), or "
+                                     "steps (an actor reviews while its review episodes played "
+                                     "fewer than that share of the steps since the last phase "
+                                     "switch, and randomises while its randomised episodes "
+                                     "played fewer than that share of all its steps)",
                                      REVIEW_UNITS)
     curriculum_steps: Optional[int] = _f(None, "adaptive curriculum: step limit of episodes that "
                                          "start in a phase easier than the full task (none = "

@@ -304,7 +304,8 @@ def test_curriculum_dr_starts_a_share_of_episodes_as_the_randomised_full_task():
     from dqn_mine.env import MineRescueEnv
     from dqn_mine.system.curriculum import DR_PHASE
 
-    cfg = parse_args(["--preset", "cpu-three-room", "--curriculum-dr", "0.3"])
+    cfg = parse_args(["--preset", "cpu-three-room", "--curriculum-dr", "0.3",
+                      "--curriculum-review-unit", "episodes", "--curriculum-review", "0"])
     cur, rng = Curriculum(cfg), np.random.default_rng(0)
     starts = [cur.episode_start(13, 0, rng) for _ in range(4_000)]
     dr = [settings for phase, settings in starts if phase == DR_PHASE]
@@ -327,6 +328,44 @@ def test_curriculum_dr_starts_a_share_of_episodes_as_the_randomised_full_task():
             assert info["agent_room"] == 2 and info["miner_room"] == 0   # phase 13: room 2
     env.close()
     assert len(rooms) >= 4 and rooms != {(0, 2, 0)}
+
+
+def test_curriculum_dr_by_steps_gives_randomised_episodes_that_share_of_the_steps():
+    """Randomised full tasks fail at 2,000 steps, the phase's episodes end sooner: by episodes
+    30% of them were ~52% of the steps; by steps (the preset's unit) 30% of the steps, with no
+    random number drawn for the decision, over the actor's whole run (no reset at a switch)."""
+    import numpy as np
+
+    from dqn_mine.system.curriculum import DR_PHASE
+
+    cfg = parse_args(["--preset", "cpu-three-room", "--curriculum-dr", "0.3"])
+    assert cfg.curriculum_review_unit == "steps"
+    cur, rng = Curriculum(cfg), np.random.default_rng(0)
+    dr_steps = all_steps = 0
+    for i in range(3_000):
+        phase, _ = cur.episode_start(17 if i < 1_500 else 16, 0, rng)
+        length = 2_000 if phase == DR_PHASE else 800
+        cur.played(phase, length)
+        dr_steps += length * (phase == DR_PHASE)
+        all_steps += length
+    assert (cur.dr_steps, cur.all_steps) == (dr_steps, all_steps)
+    assert abs(dr_steps / all_steps - 0.3) < 0.01
+    by_episodes = Curriculum(parse_args(["--preset", "cpu-three-room", "--curriculum-dr", "0.3",
+                                         "--curriculum-review-unit", "episodes"]))
+    shares = []
+    for _ in range(3_000):
+        phase, _ = by_episodes.episode_start(17, 0, rng)
+        shares.append(2_000 if phase == DR_PHASE else 0)
+        by_episodes.played(phase, 2_000 if phase == DR_PHASE else 800)
+    assert abs(sum(shares) / by_episodes.all_steps - 0.3 * 2000 / (0.3 * 2000 + 0.7 * 800)) < 0.03
+    no_review = Curriculum(parse_args(["--preset", "cpu-three-room", "--curriculum-dr", "0.3",
+                                       "--curriculum-review", "0"]))
+    no_review.played(16, 800)
+    state = rng.bit_generator.state
+    assert no_review.episode_start(16, 0, rng)[0] == DR_PHASE     # 0 < 0.3 * 800
+    no_review.played(DR_PHASE, 2_000)
+    assert no_review.episode_start(16, 0, rng)[0] == 16           # 2,000 >= 0.3 * 2,800
+    assert rng.bit_generator.state == state, "the decision draws no random number"
 
 
 

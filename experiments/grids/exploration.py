@@ -9,8 +9,8 @@ CONFIGS = {
     "baseline": {},
     "curriculum": {"curriculum": "adaptive"},
     "any-room": {"placement": "any-room"},
-    # both: 30% of the episodes start as the full task in random rooms, the rest follow the
-    # phases (the curriculum's rule counts only those)
+    # both: 30% of the episodes (of the steps at scale cpu, whose review counts steps) start as
+    # the full task in random rooms, the rest follow the phases (the rule counts only those)
     "curriculum+dr": {"curriculum": "adaptive", "curriculum_dr": 0.3},
 }
 CPU_PHASES = {"boulder_phases": True, "curriculum_review": 0.5, "curriculum_review_unit": "steps"}
