@@ -332,7 +332,7 @@ def test_curriculum_dr_starts_a_share_of_episodes_as_the_randomised_full_task():
 
 def test_curriculum_dr_by_steps_gives_randomised_episodes_that_share_of_the_steps():
     """Randomised full tasks fail at 2,000 steps, the phase's episodes end sooner: by episodes
-    30% of them were ~52% of the steps; by steps (the preset's unit) 30% of the steps, with no
+    30% of them are ~52% of the steps; by steps (the preset's unit) 30% of the steps, with no
     random number drawn for the decision, over the actor's whole run (no reset at a switch)."""
     import numpy as np
 
