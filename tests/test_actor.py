@@ -181,4 +181,5 @@ def test_actor_counts_the_steps_of_its_finished_episodes_for_review_by_steps():
         cur = actor.curriculum
         assert cur.played_steps == sum(e.length for e in records)
         assert cur.review_steps == sum(e.length for e in records if e.phase > 4)
+        assert (cur.all_steps, cur.dr_steps) == (cur.played_steps, 0)   # no DR episodes
         assert {e.phase for e in records} <= {4, 5, 6} and any(e.phase > 4 for e in records)
