@@ -174,7 +174,7 @@ def _num(value: float) -> str:
 
 def _last(points: list[tuple]) -> str:
     """The last point's return, 2 decimals ("-" with none or NaN)."""
-    return f"{points[-1][2]:.2f}" if points and not math.isnan(points[-1][2]) else "-"
+    return _num(points[-1][2]) if points else "-"
 
 
 def band(curves: list[list[tuple[float, float]]], grid) -> tuple[list, list, list]:
