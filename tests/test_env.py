@@ -18,18 +18,9 @@ import dqn_mine  # noqa: F401  (registers the environment)
 from dqn_mine.env import ENV_ID, MineRescueEnv
 from dqn_mine.env.entities import BOULDER, KIT, MINER
 from dqn_mine.env.mine import AGENT_RADIUS, HEADINGS
+from tests.env_configs import TASK_CONFIGS, ids
 
-CONFIGS = [
-    dict(task="one-room"),
-    dict(task="two-room"),
-    dict(task="three-room"),
-    dict(task="rooms", num_rooms=2),
-    dict(task="rooms", num_rooms=4),
-    dict(task="two-room", placement="any-room"),
-    dict(task="three-room", placement="any-room"),
-    dict(task="rooms", num_rooms=4, placement="any-room"),
-]
-IDS = ["-".join(str(v) for v in c.values()) for c in CONFIGS]
+IDS = ids(TASK_CONFIGS)
 FORWARD, BACKWARD, RIGHT, LEFT, INTERACT, NOOP = range(6)
 
 
@@ -82,14 +73,14 @@ def test_registered_without_time_limit():
     env.close()
 
 
-@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+@pytest.mark.parametrize("config", TASK_CONFIGS, ids=IDS)
 def test_gymnasium_env_checker(config):
     env = MineRescueEnv(**config)
     check_env(env, skip_render_check=True)
     env.close()
 
 
-@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+@pytest.mark.parametrize("config", TASK_CONFIGS, ids=IDS)
 def test_observation_and_info(envs, config):
     env = get(envs, config)
     obs, info = env.reset(seed=1)
@@ -118,7 +109,7 @@ def test_start_rooms_follow_the_task(envs):
     assert len(seen) > 5
 
 
-@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+@pytest.mark.parametrize("config", TASK_CONFIGS, ids=IDS)
 def test_same_seed_same_frames(envs, config):
     env = get(envs, config)
     other = MineRescueEnv(**config)  # a second env in the same process shares the GL context
@@ -138,7 +129,7 @@ def _fingerprint(env):
             env.heading, tuple((e.kind, round(e.x, 6), round(e.z, 6)) for e in env.entities))
 
 
-@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+@pytest.mark.parametrize("config", TASK_CONFIGS, ids=IDS)
 def test_different_seeds_different_layouts(envs, config):
     env = get(envs, config)
     prints = set()
@@ -148,7 +139,7 @@ def test_different_seeds_different_layouts(envs, config):
     assert len(prints) == 10
 
 
-@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+@pytest.mark.parametrize("config", TASK_CONFIGS, ids=IDS)
 def test_rooms_never_overlap_and_all_reachable(envs, config):
     env = get(envs, config)
     for seed in range(20):
@@ -178,7 +169,7 @@ def test_rooms_never_overlap_and_all_reachable(envs, config):
         assert reached == set(range(len(rooms)))
 
 
-@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+@pytest.mark.parametrize("config", TASK_CONFIGS, ids=IDS)
 def test_nothing_spawns_inside_anything(envs, config):
     env = get(envs, config)
     for seed in range(30):
@@ -203,7 +194,7 @@ def test_nothing_spawns_inside_anything(envs, config):
 # --- physics -----------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+@pytest.mark.parametrize("config", TASK_CONFIGS, ids=IDS)
 def test_random_walk_never_passes_walls_or_entities(envs, config):
     env = get(envs, config)
     rng = random.Random(1)

@@ -10,15 +10,9 @@ import pytest
 from dqn_mine.env import MineRescueEnv
 from dqn_mine.env.entities import BOULDER
 from dqn_mine.env.tasks import PHASES, THREE_ROOM_BOULDER_PHASES, TWO_ROOM_PHASES, phase_table
+from tests.env_configs import TASK_CONFIGS, ids
 
-SOLVE_CONFIGS = [
-    dict(task="one-room"),
-    dict(task="two-room"),
-    dict(task="three-room"),
-    dict(task="rooms", num_rooms=2),
-    dict(task="rooms", num_rooms=4),
-    dict(task="two-room", placement="any-room"),
-    dict(task="three-room", placement="any-room"),
+SOLVE_CONFIGS = TASK_CONFIGS + [
     dict(task="rooms", num_rooms=5, placement="any-room"),
     dict(task="one-room", room_size=8.0, max_episode_steps=200),  # the smoke preset's task
     # the smallest rooms with two doorways each: little space to put a boulder aside
@@ -26,7 +20,7 @@ SOLVE_CONFIGS = [
     dict(task="rooms", num_rooms=5, room_size=8.0, placement="any-room"),
     dict(task="rooms", num_rooms=12),                # the most rooms the env accepts
 ]
-IDS = ["-".join(str(v) for v in c.values()) for c in SOLVE_CONFIGS]
+IDS = ids(SOLVE_CONFIGS)
 
 
 def expert_episode(env: MineRescueEnv, seed: int) -> tuple:
