@@ -317,7 +317,9 @@ PRESETS: dict[str, dict[str, Any]] = {
 # the kit must be taken after only ever starting with it in hand; see dqn_mine/env/tasks.py), half
 # of the steps reviewing passed phases (with 30% of the episodes, ~4% of the steps, the skills
 # of passed phases decayed within 15 minutes of a stalled phase; docs/three_room.md) and an
-# update budget for 90 minutes at ~100 updates/s.
+# update budget for 90 minutes at ~100 updates/s. The target sync stays at 1,000 updates: every
+# 250 brought the first phases in 40% fewer updates, then the long phase from room 1 stalled and
+# the search of room 2 decayed (docs/three_room.md).
 PRESETS["cpu-three-room"] = {**PRESETS["cpu"], "task": "three-room", "boulder_phases": True,
                              "curriculum_review": 0.5, "curriculum_review_unit": "steps",
                              "updates": 600_000}
