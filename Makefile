@@ -51,7 +51,8 @@ clean:
 # | auto (the default: paper on a CUDA machine, else quick).
 # SEEDS=N runs seeds 0..N-1 (default: the grid's for the scale); JOBS=J runs at a time (never more
 # busy processes than cores); CONFIGS="A B" runs only those configurations. Re-running the same
-# command skips finished runs and resumes interrupted ones. Output: $(OUT)summary.csv, report.md and PNG plots.
+# command skips finished runs and resumes interrupted ones. Output: $(OUT)summary.csv, report.md
+# and PNG plots.
 GRID  ?= ablation
 SCALE ?= auto
 SEEDS ?=
