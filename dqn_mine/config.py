@@ -129,6 +129,12 @@ class Config:
     # With Huber loss and IS weights <= 1, dLoss/dQ is bounded per sample, so a norm-40 clip
     # rarely binds; it guards against rare spikes (e.g. right after a target sync) at no cost.
     target_update_interval: int = _f(2500, "updates between target network syncs (Ape-X value)")
+    target_update_early: Optional[int] = _f(None, "adaptive curriculum: target sync interval "
+                                            "while the phase is at or above "
+                                            "--target-update-early-phase (none = "
+                                            "--target-update-interval throughout)")
+    target_update_early_phase: int = _f(12, "the easiest phase that syncs every "
+                                        "--target-update-interval again is the one below this")
     max_grad_norm: Optional[float] = _f(40.0, "clip the global gradient norm (none or 0 = off; "
                                         "Ape-X value)")
     publish_interval: int = _f(500, "updates between weight broadcasts to the actors")
@@ -436,6 +442,10 @@ def _task_problems(c: Config) -> list[str]:
     if c.curriculum_dr and c.curriculum not in PHASED_CURRICULA:
         p.append("--curriculum-dr applies to --curriculum adaptive or uniform only (for domain "
                  "randomisation alone use --placement any-room)")
+    if c.target_update_early is not None and (c.curriculum != "adaptive"
+                                              or c.target_update_early < 1):
+        p.append("--target-update-early needs --curriculum adaptive and a count of at least 1, "
+                 f"got {c.target_update_early} with --curriculum {c.curriculum}")
     if c.curriculum_steps is not None and c.curriculum not in PHASED_CURRICULA:
         p.append("--curriculum-steps applies to --curriculum adaptive or uniform only")
     if c.task == "rooms" and not 2 <= c.num_rooms <= MAX_ROOMS:
@@ -602,6 +612,13 @@ def network_shape(cfg) -> dict[str, int]:
     """The network's constructor arguments, from a Config or its saved dict (a checkpoint's)."""
     values = cfg if isinstance(cfg, dict) else cfg.to_dict()
     return {name: values[name] for name in NETWORK_SHAPE}
+
+
+def target_update_interval(c: Config, phase: int) -> int:
+    """Updates between target syncs while the adaptive curriculum is in ``phase``."""
+    if c.target_update_early is not None and phase >= c.target_update_early_phase:
+        return c.target_update_early
+    return c.target_update_interval
 
 
 def learner_threads(cfg: Config, cores: Optional[int] = None) -> int:

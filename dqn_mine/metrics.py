@@ -19,6 +19,7 @@ COLUMNS = (
     # under the Ape-X rates they show what the near-greedy policy does, apart from the envs
     # that mostly explore.
     "low_eps_return", "phase_low_eps_return",
+    "target_sync",    # updates between target syncs at this row (--target-update-early moves it)
 )
 LOW_EPSILON = 0.01   # the study's rate: an env at or below it plays (almost) its greedy policy
 

@@ -109,6 +109,8 @@ BAD = [
     (["--frame-stack", "0"], "--frame-stack"),
     (["--history-len", "-1"], "--history-len"),
     (["--target-update-interval", "0"], "--target-update-interval"),
+    (["--target-update-early", "250"], "--target-update-early"),
+    (["--preset", "cpu", "--target-update-early", "0"], "--target-update-early"),
     (["--publish-interval", "0"], "--publish-interval"),
     (["--replay-ratio", "0"], "--replay-ratio"),
     (["--max-grad-norm", "-1"], "--max-grad-norm"),

@@ -147,6 +147,18 @@ def test_phases_advance_through_shared_state(tmp_path):
     assert phases[-1] == 1 and phases[0] < 6
 
 
+def test_early_target_sync_holds_until_the_phase_below_the_named_one(tmp_path):
+    """--target-update-early sets the learner's sync interval while the phase is at or above
+    --target-update-early-phase, --target-update-interval from the phase below it on."""
+    rows = run("--task", "three-room", "--curriculum", "adaptive", "--curriculum-window", "6",
+               "--curriculum-threshold", "-1", "--updates", "400", "--serial",
+               "--target-update-interval", "7", "--target-update-early", "3",
+               "--target-update-early-phase", "3", "--run-dir", str(tmp_path / "cl"), *FAST)
+    seen = {(int(r["phase"]), int(r["target_sync"])) for r in rows}
+    assert all(sync == (3 if phase >= 3 else 7) for phase, sync in seen), seen
+    assert {sync for _, sync in seen} == {3, 7}, seen
+
+
 def test_review_starts_a_share_of_episodes_in_easier_phases():
     import numpy as np
 
