@@ -11,7 +11,8 @@ Definitions (the tests check them by hand):
 - ``best_eval_return_mean`` is the mean over seeds of each seed's highest evaluation return
   (a task learned for a while and forgotten, or learned only at the end, still shows);
   ``hardest_phase_mean`` the mean over seeds of the hardest curriculum phase each seed reached
-  (the lowest phase number above 0; empty without a phased curriculum);
+  (the lowest phase number above 0; under the room schedule the most rooms; empty without
+  either);
 - rate columns (``updates_per_s``, ``env_steps_per_s``) and ``sampled_reward_mean`` are the
   mean over seeds of each seed's mean over its rows; ``updates``, ``wall_time_s`` and
   ``replay_ratio`` are the mean over seeds of each seed's last value;
@@ -45,12 +46,14 @@ FINALS = {"return": "episode_return", "length": "episode_length", "eval_return":
 
 @dataclass
 class SeedRun:
-    """One run folder's table (columns as float arrays sorted by update) and summary.json."""
+    """One run folder's table (columns as float arrays sorted by update), summary.json and
+    the run's --curriculum (from config.json)."""
 
     config: str
     seed: int
     columns: dict[str, np.ndarray]
     summary: dict
+    curriculum: str = "none"
 
     @property
     def finished(self) -> bool:
@@ -81,11 +84,17 @@ def load_run(run_dir: Path, config: str, seed: int) -> SeedRun | None:
     by_update = {row["update"]: row for row in rows}
     ordered = [by_update[u] for u in sorted(by_update)]
     columns = {k: np.array([r[k] for r in ordered], dtype=float) for k in ordered[0]}
+    summary = _read_json(Path(run_dir) / "summary.json")
+    curriculum = str(_read_json(Path(run_dir) / "config.json").get("curriculum", "none"))
+    return SeedRun(config, seed, columns, summary, curriculum)
+
+
+def _read_json(path: Path) -> dict:
+    """A run folder's JSON file, or {} while it is missing or half written."""
     try:
-        summary = json.loads((Path(run_dir) / "summary.json").read_text())
+        return json.loads(path.read_text())
     except (OSError, ValueError):
-        summary = {}
-    return SeedRun(config, seed, columns, summary)
+        return {}
 
 
 def load_runs(out: Path, configs: Sequence[str], seeds: Sequence[int]) -> dict[str, list[SeedRun]]:
@@ -118,10 +127,13 @@ def max_finite(values: np.ndarray) -> float:
 
 
 def hardest_phase(run: SeedRun) -> float:
-    """The lowest curriculum phase above 0 the run logged (NaN without phases)."""
+    """The lowest curriculum phase above 0 the run logged, or under the room schedule (whose
+    ``phase`` column is the room count) the most rooms; NaN without either."""
     phases = run.columns.get("phase", np.array([]))
     phases = phases[np.isfinite(phases) & (phases > 0)]
-    return float(phases.min()) if phases.size else math.nan
+    if not phases.size:
+        return math.nan
+    return float(phases.max() if run.curriculum == "schedule" else phases.min())
 
 
 def mean_finite(values: np.ndarray) -> float:

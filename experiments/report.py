@@ -122,7 +122,7 @@ def render(grid: Grid, scale: str, seeds: Sequence[int], rows: list[dict],
     if eval_col:
         head += ["final eval return", "best eval return"]
     if phase_col:
-        head.append("hardest phase reached")
+        head.append("hardest phase reached (schedule: rooms)")
     head += ["final ep. length", "updates", "wall time", "updates/s", "replay ratio",
              "sampled reward"]
     lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]

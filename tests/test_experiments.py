@@ -231,6 +231,18 @@ def test_summary_matches_hand_computation(tmp_path):
     assert b["early_return_mean"] == pytest.approx(0.1)
 
 
+def test_hardest_phase_of_a_room_schedule_is_its_most_rooms(tmp_path):
+    """Under --curriculum schedule the phase column holds the room count, which grows."""
+    for name, curriculum in (("sched", "schedule"), ("phased", "adaptive")):
+        _write_metrics(tmp_path / name / "seed0", [_row(100, 1.0, 0.0, phase=3),
+                                                   _row(200, 2.0, 0.0, phase=5)])
+        (tmp_path / name / "seed0" / "config.json").write_text(
+            json.dumps({"curriculum": curriculum}))
+    runs = load_runs(tmp_path, ["sched", "phased"], [0])
+    assert summarize_config("sched", "", runs["sched"])["hardest_phase_mean"] == 5
+    assert summarize_config("phased", "", runs["phased"])["hardest_phase_mean"] == 3
+
+
 def test_curves_interpolate_seeds_on_a_common_grid():
     xs = [np.array([100.0, 200.0, 300.0]), np.array([150.0, 250.0, 350.0])]
     ys = [np.array([np.nan, 0.2, 0.4]), np.array([0.0, 0.6, 1.0])]
@@ -262,7 +274,7 @@ def test_claims_and_report_from_synthetic_runs(tmp_path):
     report = build_report(grid, "paper", tmp_path, [0, 1]).read_text()
     assert "a ahead of b: **yes** (a 0.600 vs b 0.300" in report
     assert "| `a` | actors=2 | 2 (1) | 0.600 ± 0.283 [0.400, 0.800] | 2.5 |" in report
-    assert "| final return | hardest phase reached |" in report
+    assert "| final return | hardest phase reached (schedule: rooms) |" in report
     with open(tmp_path / "summary.csv", newline="") as f:
         summary = {r["config"]: r for r in csv.DictReader(f)}
     assert float(summary["a"]["final_return_mean"]) == pytest.approx(0.6)
