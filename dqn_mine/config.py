@@ -133,8 +133,9 @@ class Config:
                                             "while the phase is at or above "
                                             "--target-update-early-phase (none = "
                                             "--target-update-interval throughout)")
-    target_update_early_phase: int = _f(12, "the easiest phase that syncs every "
-                                        "--target-update-interval again is the one below this")
+    target_update_early_phase: int = _f(12, "the hardest phase that syncs every "
+                                        "--target-update-early; phases below it sync every "
+                                        "--target-update-interval")
     max_grad_norm: Optional[float] = _f(40.0, "clip the global gradient norm (none or 0 = off; "
                                         "Ape-X value)")
     publish_interval: int = _f(500, "updates between weight broadcasts to the actors")
