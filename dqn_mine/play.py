@@ -50,10 +50,10 @@ POLICIES: dict[str, Callable[[argparse.Namespace], Policy]] = {
 
 # Environment settings play takes from a checkpoint's config unless given on the command line.
 ENV_DEFAULTS = {"task": "two-room", "room_size": 16.0, "placement": "fixed", "num_rooms": None,
-                "max_steps": None, "room_colours": False}
+                "max_steps": None, "room_colours": False, "camera_pitch": 0.0}
 CONFIG_KEYS = {"task": "task", "room_size": "room_size", "placement": "placement",
                "num_rooms": "num_rooms", "max_steps": "max_episode_steps",
-               "room_colours": "room_colours"}
+               "room_colours": "room_colours", "camera_pitch": "camera_pitch"}
 
 
 def fill_env_settings(args: argparse.Namespace) -> None:
@@ -86,6 +86,8 @@ def make_env(args: argparse.Namespace):
         kwargs["boulder_phases"] = True
     if args.room_colours:
         kwargs["room_colours"] = True
+    if args.camera_pitch:
+        kwargs["camera_pitch"] = args.camera_pitch
     if args.max_steps is not None:
         kwargs["max_episode_steps"] = args.max_steps
     return MineRescueEnv(**kwargs)
@@ -148,6 +150,8 @@ def add_episode_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--room-colours", action=argparse.BooleanOptionalAction, default=None,
                     help="each room's floor in a colour of its own (default: the checkpoint's, "
                          "else off)")
+    ap.add_argument("--camera-pitch", type=float, default=None,
+                    help="degrees the camera looks down, 0..30 (default: the checkpoint's, else 0)")
     ap.add_argument("--seed", type=int, default=0, help="episode seed (the first one)")
     ap.add_argument("--max-steps", type=int, default=None, help="step limit (default: the task's)")
 

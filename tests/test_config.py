@@ -102,6 +102,8 @@ BAD = [
     (["--eta", "0"], "--eta"),
     (["--gamma", "0"], "--gamma"),
     (["--gamma", "1.01"], "--gamma"),
+    (["--camera-pitch", "-1"], "--camera-pitch"),
+    (["--camera-pitch", "31"], "--camera-pitch"),
     (["--epsilon", "2"], "--epsilon"),
     (["--eval-epsilon", "-1"], "--eval-epsilon"),
     (["--return-window", "0"], "--return-window"),

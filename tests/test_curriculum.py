@@ -407,3 +407,12 @@ def test_room_colours_reach_the_training_and_the_evaluation_envs():
     assert eval_env_kwargs(cfg)["room_colours"] is True     # the same look when scored
     plain = parse_args(["--preset", "cpu-three-room"])
     assert "room_colours" not in actor_specs(plain)[0].env_kwargs
+
+
+def test_camera_pitch_reaches_the_training_and_the_evaluation_envs():
+    cfg = parse_args(["--preset", "cpu-three-room"])         # the preset pitches it 15 down
+    assert actor_specs(cfg)[0].env_kwargs["camera_pitch"] == 15.0
+    assert eval_env_kwargs(cfg)["camera_pitch"] == 15.0      # scored through the same eyes
+    level = parse_args(["--preset", "cpu-three-room", "--camera-pitch", "0"])
+    assert "camera_pitch" not in actor_specs(level)[0].env_kwargs
+    assert "camera_pitch" not in actor_specs(parse_args(["--preset", "cpu"]))[0].env_kwargs

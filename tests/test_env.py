@@ -318,6 +318,30 @@ def test_a_held_boulder_leaves_the_kit_ahead_in_view(envs):
     assert held[h - 3:, w // 3: 2 * w // 3].any(), "the boulder is still drawn in hand"
 
 
+def test_a_pitched_camera_shows_an_item_in_reach(envs):
+    """Level (MiniWorld's camera) a kit within action 4's reach lies below the view; pitched 15
+    degrees down it shows at every reachable distance, and the world is unchanged."""
+    level = get(envs, dict(task="one-room"))
+    pitched = get(envs, dict(task="one-room", camera_pitch=15.0))
+    for gap in (0.0, 0.3, 0.6):           # kit centre 0.85-1.45 ahead: all within reach
+        seen = []
+        for env in (level, pitched):
+            env.reset(seed=3)
+            stand_before(env, env.kit, gap=gap)
+            obs, _, _, _, info = env.step(NOOP)
+            seen.append((_red_pixels(obs), info, (env.agent_x, env.agent_z, env.heading)))
+        (red_level, info_level, pose_level), (red_pitched, info_pitched, pose_pitched) = seen
+        assert red_level == 0 and red_pitched >= 25, (gap, red_level, red_pitched)
+        assert info_level == info_pitched and pose_level == pose_pitched
+    _, _, _, _, info = pitched.step(INTERACT)
+    assert info["carrying_kit"]
+    held = _red_mask(pitched._last_obs)
+    h, w = held.shape
+    rows = np.nonzero(held.any(axis=1))[0]
+    assert rows.min() >= h - 10 and held[:, w // 3: 2 * w // 3].sum() > 20, \
+        "the held kit stays in the bottom rows under a pitched camera"
+
+
 def test_drop_needs_room(envs):
     env = get(envs, dict(task="one-room"))
     env.reset(seed=4)
@@ -487,6 +511,9 @@ def test_truncation_at_the_step_limit():
     (dict(task="three-room", phase=19, boulder_phases=True), "phase"),
     (dict(task="two-room", boulder_phases=True), "boulder_phases"),
     (dict(render_mode="human"), "render_mode"),
+    (dict(camera_pitch=-5.0), "camera_pitch"),
+    (dict(camera_pitch=45.0), "camera_pitch"),
+    (dict(camera_pitch=float("nan")), "camera_pitch"),
 ])
 def test_bad_arguments(kwargs, match):
     with pytest.raises(ValueError, match=match):

@@ -8,6 +8,7 @@ builders that place rooms, entities and the agent). A task only decides where th
 from __future__ import annotations
 
 import math
+import numbers
 import random
 
 import gymnasium as gym
@@ -69,6 +70,12 @@ MIN_ROOM_SIZE = 8.0
 LIGHT_RANGE = (0.6, 1.3)           # overall light level
 TINT_RANGE = (0.85, 1.15)          # per-channel colour of walls, floor and ceiling
 FOV_RANGE = (50.0, 70.0)           # vertical field of view, degrees
+# An optional camera pitched down (degrees). Level (0, MiniWorld's camera) the floor in view
+# begins 2.6 units ahead, beyond action 4's reach: the agent must press on a kit it saw a step or
+# two before. At 15 degrees the view's bottom edge meets the floor 1.5 units ahead and part of a
+# kit anywhere in reach stays in view; the top edge still shows a wall's full height from 5.6
+# units away.
+MAX_CAMERA_PITCH = 30.0
 
 _COS = [math.cos(2 * math.pi * k / HEADINGS) for k in range(HEADINGS)]
 _SIN = [math.sin(2 * math.pi * k / HEADINGS) for k in range(HEADINGS)]
@@ -85,14 +92,19 @@ class MineEnv(gym.Env):
 
     def __init__(self, max_episode_steps: int, room_size: float = 16.0,
                  render_mode: str | None = None, randomise_visuals: bool = False,
-                 room_colours: bool = False):
+                 room_colours: bool = False, camera_pitch: float = 0.0):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if (not isinstance(camera_pitch, numbers.Real) or isinstance(camera_pitch, bool)
+                or not 0.0 <= camera_pitch <= MAX_CAMERA_PITCH):
+            raise ValueError(f"camera_pitch must be in [0, {MAX_CAMERA_PITCH:g}] degrees, "
+                             f"got {camera_pitch!r}")
         self.render_mode = render_mode
         self.room_size = float(room_size)
         self.max_episode_steps = int(max_episode_steps)
         self.randomise_visuals = bool(randomise_visuals)
         self.room_colours = bool(room_colours)
+        self.camera_pitch = float(camera_pitch)
         self.light, self.tint, self.fov_y = 1.0, np.ones(3, np.float32), FOV_Y
         self.observation_space = spaces.Box(0, 255, FRAME_SHAPE, np.uint8)
         self.action_space = spaces.Discrete(NUM_ACTIONS)
@@ -349,7 +361,7 @@ class MineEnv(gym.Env):
             from dqn_mine.env.render import Scene
 
             far = 2.0 * self.room_size * (len(self.layout.rooms) + 1)
-            self._scene = Scene(OBS_WIDTH, OBS_HEIGHT, FOV_Y, EYE_HEIGHT, far)
+            self._scene = Scene(OBS_WIDTH, OBS_HEIGHT, FOV_Y, EYE_HEIGHT, far, self.camera_pitch)
         dynamic = (np.concatenate([e.vertices() for e in world]) if world
                    else np.zeros((0, mesh.VERTEX_FLOATS), np.float32))
         held = self._held_mesh()
@@ -373,7 +385,8 @@ class MineEnv(gym.Env):
             return np.zeros((0, mesh.VERTEX_FLOATS), np.float32)
         local, ahead = local_mesh(item.kind), _carry_ahead(item)
         out = mesh.place(local, ahead, 0.0, 1.0, 0.0)
-        below_eye = ahead * math.tan(math.radians(HELD_TOP_ANGLE))
+        # The same rows of the image under a pitched camera.
+        below_eye = ahead * math.tan(math.radians(HELD_TOP_ANGLE + self.camera_pitch))
         out[:, 1] += EYE_HEIGHT - below_eye - local[:, 1].max()
         return out
 

@@ -28,6 +28,7 @@ _VERTEX_SHADER = """
 uniform vec4 cam;    // eye x, eye z, cos(heading), sin(heading)
 uniform vec4 proj;   // x scale, y scale, depth A, depth B
 uniform float eye_y;
+uniform vec2 tilt;   // cos, sin of the camera's downward pitch
 in vec3 in_pos;
 in vec3 in_col;
 in float in_mat;
@@ -38,9 +39,11 @@ out float v_depth;
 void main() {
     vec3 p = in_pos - vec3(cam.x, eye_y, cam.y);
     float xv = -cam.w * p.x + cam.z * p.z;       // to the right of the heading
-    float zv = -(cam.z * p.x + cam.w * p.z);     // negative in front of the camera
+    float zl = -(cam.z * p.x + cam.w * p.z);     // negative in front of a level camera
+    float yv = tilt.x * p.y - tilt.y * zl;       // pitched down about the view's x axis
+    float zv = tilt.y * p.y + tilt.x * zl;
     // y is negated so that glReadPixels' first row is the top of the image.
-    gl_Position = vec4(xv * proj.x, -p.y * proj.y, proj.z * zv + proj.w, -zv);
+    gl_Position = vec4(xv * proj.x, -yv * proj.y, proj.z * zv + proj.w, -zv);
     v_col = in_col;
     v_pos = in_pos;
     v_mat = in_mat;
@@ -101,6 +104,7 @@ class _Gl:
         self.cam = self.prog["cam"]
         self.proj = self.prog["proj"]
         self.eye_y = self.prog["eye_y"]
+        self.tilt = self.prog["tilt"]
         self.pixels = np.empty((height, width, 3), np.uint8)
         self.ctx.enable(self.ctx.DEPTH_TEST)
         self.fbo.use()
@@ -124,12 +128,14 @@ def gl(width: int, height: int) -> _Gl:
 class Scene:
     """One environment's vertex buffer, drawn from the agent's eye into a (3, H, W) image."""
 
-    def __init__(self, width: int, height: int, fov_y: float, eye_height: float, far: float):
+    def __init__(self, width: int, height: int, fov_y: float, eye_height: float, far: float,
+                 pitch: float = 0.0):
         self.g = gl(width, height)
         self.aspect, self.far = height / width, far
         self.fov_y = None
         self.set_fov(fov_y)
         self.eye_height = float(eye_height)
+        self.tilt = (math.cos(math.radians(pitch)), math.sin(math.radians(pitch)))
         self.capacity = 0
         self.vbo = None
         self.vao = None
@@ -185,6 +191,7 @@ class Scene:
         if g.projection is not self.projection:  # envs of one process may differ in fov/eye
             g.proj.value = self.projection
             g.eye_y.value = self.eye_height
+            g.tilt.value = self.tilt
             g.projection = self.projection
         g.cam.value = (x, z, cos, sin)
         g.fbo.clear(0.0, 0.0, 0.0, 1.0)

@@ -255,13 +255,16 @@ class MineRescueEnv(MineEnv):
             episode (visual domain randomisation; the layout of a seed does not change).
         room_colours: each room's floor in a colour of its own, by room index (the rooms are
             otherwise alike, and the view through a doorway then shows which room lies beyond).
+        camera_pitch: degrees the camera looks down, 0..30 (0: level, MiniWorld's camera; at 15
+            an item within action 4's reach stays at least partly in view).
     """
 
     def __init__(self, task: str = "two-room", num_rooms: int | None = None,
                  room_size: float = 16.0, max_episode_steps: int | None = None,
                  placement: str = "fixed", phase: int | None = None,
                  render_mode: str | None = None, randomise_visuals: bool = False,
-                 boulder_phases: bool = False, room_colours: bool = False):
+                 boulder_phases: bool = False, room_colours: bool = False,
+                 camera_pitch: float = 0.0):
         if task not in TASKS:
             raise ValueError(f"unknown task {task!r}; choose one of {', '.join(TASKS)}")
         spec = TASKS[task]
@@ -286,7 +289,7 @@ class MineRescueEnv(MineEnv):
         self.boulder_phases = bool(boulder_phases)
         self.phase = _check_phase(task, placement, phase, self.boulder_phases)
         super().__init__(max_episode_steps, room_size, render_mode, randomise_visuals,
-                         room_colours)
+                         room_colours, camera_pitch)
 
     def _generate(self) -> None:
         TASKS[self.task].generate(self)
