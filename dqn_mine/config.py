@@ -420,9 +420,6 @@ def _rate_problems(c: Config) -> list[str]:
         p.append(f"--curriculum-review must be in [0, 1), got {c.curriculum_review}")
     if not c.ez_mu > 1.0:
         p.append(f"--ez-mu must be greater than 1, got {c.ez_mu}")
-    if not 0.0 <= c.camera_pitch <= MAX_CAMERA_PITCH:
-        p.append(f"--camera-pitch must be in [0, {MAX_CAMERA_PITCH:g}] degrees, "
-                 f"got {c.camera_pitch}")
     if not c.lr > 0:
         p.append(f"--lr must be positive, got {c.lr}")
     if c.zeta < 0:
@@ -445,6 +442,9 @@ def _task_problems(c: Config) -> list[str]:
         p.append(f"--room-size must be a positive finite number, got {c.room_size}")
     if c.max_episode_steps is not None and c.max_episode_steps < 1:
         p.append(f"--max-episode-steps must be at least 1, got {c.max_episode_steps}")
+    if not 0.0 <= c.camera_pitch <= MAX_CAMERA_PITCH:
+        p.append(f"--camera-pitch must be in [0, {MAX_CAMERA_PITCH:g}] degrees, "
+                 f"got {c.camera_pitch}")
     if c.curriculum_steps is not None and c.curriculum_steps < 1:
         p.append(f"--curriculum-steps must be at least 1, got {c.curriculum_steps}")
     if not 0.0 <= c.curriculum_dr < 1.0:
