@@ -7,7 +7,8 @@ the checkpoint (``--out`` elsewhere). ``--video PATH`` also records one of the s
 (GIF, or MP4 with imageio-ffmpeg): the first, or with ``--video-of delivered`` the first that
 delivered (an agent that succeeds now and then on a long task is worth seeing succeed).
 ``outcomes`` counts how the episodes ended: delivered, still holding the kit or a boulder, the
-kit taken and dropped, the kit never taken.
+kit taken and dropped, the kit never taken though its room was entered, the kit's room never
+entered.
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ VIDEO_OF = ("first", "delivered")
 
 # How an episode ended, for eval.json's "outcomes": what failed, not only that it did.
 OUTCOMES = ("delivered", "holding the kit", "holding a boulder", "kit dropped",
-            "kit never taken")
+            "kit never taken", "kit's room never entered")
 
 
 def play_episode(env, agent, seed: int, frames: list | None = None) -> tuple[float, int, str]:
@@ -61,7 +62,10 @@ def play_episode(env, agent, seed: int, frames: list | None = None) -> tuple[flo
     appended to ``frames`` when given."""
     obs, info = env.reset(seed=seed)
     agent.reset()
+    mine = env.unwrapped
+    kit_room = mine.layout.room_at(mine.kit.x, mine.kit.z)
     total, steps, had_kit = 0.0, 0, info["carrying_kit"]
+    entered = mine.layout.room_at(mine.agent_x, mine.agent_z) == kit_room
     while True:
         if frames is not None:
             frames.append(env.render())
@@ -69,18 +73,24 @@ def play_episode(env, agent, seed: int, frames: list | None = None) -> tuple[flo
         total += reward
         steps += 1
         had_kit = had_kit or info["carrying_kit"]
+        entered = entered or mine.layout.room_at(mine.agent_x, mine.agent_z) == kit_room
         if terminated or truncated:
             if frames is not None:
                 frames.append(env.render())
-            return total, steps, _outcome(env.unwrapped, terminated, had_kit)
+            return total, steps, _outcome(mine, terminated, had_kit, entered)
 
 
-def _outcome(env, terminated: bool, had_kit: bool) -> str:
+def _outcome(env, terminated: bool, had_kit: bool, entered_kit_room: bool = True) -> str:
+    """``entered_kit_room``: the agent was in the kit's starting room at some step (in
+    three-room, an agent that never took the kit mostly went the wrong way, into the miner's
+    room, rather than missing a kit it saw)."""
     if terminated:
         return "delivered"
     if env.carrying is not None:
         return "holding the kit" if env.carrying.kind == KIT else "holding a boulder"
-    return "kit dropped" if had_kit else "kit never taken"
+    if had_kit:
+        return "kit dropped"
+    return "kit never taken" if entered_kit_room else "kit's room never entered"
 
 
 def evaluate(env, agent, episodes: int, seed: int, progress: bool = True,
