@@ -402,11 +402,12 @@ def test_uniform_curriculum_draws_every_phase_alike_and_never_switches():
 
 
 def test_room_colours_reach_the_training_and_the_evaluation_envs():
-    cfg = parse_args(["--preset", "cpu-three-room", "--room-colours"])
+    cfg = parse_args(["--preset", "cpu-three-room"])           # the preset colours the rooms
     assert actor_specs(cfg)[0].env_kwargs["room_colours"] is True
     assert eval_env_kwargs(cfg)["room_colours"] is True     # the same look when scored
-    plain = parse_args(["--preset", "cpu-three-room"])
+    plain = parse_args(["--preset", "cpu-three-room", "--no-room-colours"])
     assert "room_colours" not in actor_specs(plain)[0].env_kwargs
+    assert "room_colours" not in actor_specs(parse_args(["--preset", "cpu"]))[0].env_kwargs
 
 
 def test_camera_pitch_reaches_the_training_and_the_evaluation_envs():
