@@ -62,10 +62,9 @@ def play_episode(env, agent, seed: int, frames: list | None = None) -> tuple[flo
     appended to ``frames`` when given."""
     obs, info = env.reset(seed=seed)
     agent.reset()
-    mine = env.unwrapped
-    kit_room = mine.layout.room_at(mine.kit.x, mine.kit.z)
+    mine, kit_room = env.unwrapped, info["kit_room"]
     total, steps, had_kit = 0.0, 0, info["carrying_kit"]
-    entered = mine.layout.room_at(mine.agent_x, mine.agent_z) == kit_room
+    entered = info["agent_room"] == kit_room
     while True:
         if frames is not None:
             frames.append(env.render())
@@ -73,7 +72,7 @@ def play_episode(env, agent, seed: int, frames: list | None = None) -> tuple[flo
         total += reward
         steps += 1
         had_kit = had_kit or info["carrying_kit"]
-        entered = entered or mine.layout.room_at(mine.agent_x, mine.agent_z) == kit_room
+        entered = entered or mine.agent_room == kit_room
         if terminated or truncated:
             if frames is not None:
                 frames.append(env.render())
