@@ -101,6 +101,9 @@ def test_phase_starts_as_specified(task, boulder, phase, kit_room, miner_room):
             assert env.facing() is env.kit
             obs = env.step(5)[0].astype(int)      # no-op: the start's frame
             assert ((obs[0] > 150) & (obs[1] < 60) & (obs[2] < 60)).sum() >= 10
+        if want.near_doorway:   # a few steps from the doorway cleared last
+            door = env.layout.doors[want.boulders_aside - 1]
+            assert 2.0 <= math.dist((env.agent_x, env.agent_z), door.center) <= 4.0
         if want.near_kit:
             assert 2.0 <= math.dist((env.agent_x, env.agent_z), (env.kit.x, env.kit.z)) <= 4.0
     env.close()
@@ -116,10 +119,15 @@ def test_harder_phases_need_more_expert_steps(task, boulder):
         env = MineRescueEnv(task=task, phase=phase, boulder_phases=boulder)
         means[phase] = statistics.mean(expert_episode(env, s)[1] for s in range(8))
         env.close()
-    order = [means[p] for p in sorted(phases, reverse=True)]   # easiest first
+    easiest_first = sorted(phases, reverse=True)
+    order = [means[p] for p in easiest_first]
     # A start facing an item is one press of action 4 from holding it, where the next easier
-    # phase starts (from another random spot): the two may swap by a step or two.
-    assert all(a <= b + 2 for a, b in zip(order, order[1:])), means
+    # phase starts (from another random spot): the two may swap by a step or two. A start
+    # holding a doorway's boulder one room further on is easier to learn than one a few steps
+    # from that doorway cleared (nothing to find), but the expert sets the boulder down first.
+    for easier, harder in zip(easiest_first, easiest_first[1:]):
+        if not (phases[easier].holding_boulder and phases[harder].near_doorway):
+            assert means[easier] <= means[harder] + 2, means
     assert order[0] < order[-1] / 5, means
 
 

@@ -426,11 +426,13 @@ class MineEnv(gym.Env):
         self.agent_x, self.agent_z = self._random_spot(AGENT_RADIUS, room, DOOR_CLEARANCE)
         self.heading = self._rng.randrange(HEADINGS)
 
-    def place_agent_near(self, room: int, item: Entity, near: float, far: float) -> None:
+    def place_agent_near(self, room: int, point: tuple[float, float], near: float,
+                         far: float) -> None:
         """The agent at a random free spot of ``room`` between ``near`` and ``far`` units from
-        ``item``'s centre, facing anywhere (doorways may be closer than usual)."""
+        ``point`` (an item's centre, a doorway's), facing anywhere (doorways may be closer than
+        usual)."""
         self.agent_x, self.agent_z = self._random_spot(AGENT_RADIUS, room, 0.0,
-                                                       ring=(item, near, far))
+                                                       ring=(point, near, far))
         self.heading = self._rng.randrange(HEADINGS)
 
     def place_agent_facing(self, room: int, item: Entity, dist: float | None = None) -> None:
@@ -461,9 +463,10 @@ class MineEnv(gym.Env):
 
     def _random_spot(self, radius: float, room: int, door_clearance: float,
                      exclude: Entity | None = None,
-                     ring: tuple[Entity, float, float] | None = None) -> tuple[float, float]:
+                     ring: tuple[tuple[float, float], float, float] | None = None
+                     ) -> tuple[float, float]:
         """A uniformly random spot of ``room`` away from walls, doorways and other entities;
-        with ``ring`` = (item, near, far) also between ``near`` and ``far`` from ``item``."""
+        with ``ring`` = (point, near, far) also between ``near`` and ``far`` from ``point``."""
         m = self.layout.rooms[room]
         margin = radius + 0.3
         doors = [d.center for d in self.layout.doors]
@@ -473,8 +476,7 @@ class MineEnv(gym.Env):
         for _ in range(1000):
             x = rand(m.x0 + margin, m.x1 - margin)
             z = rand(m.z0 + margin, m.z1 - margin)
-            if ring is not None and not ring[1] <= math.hypot(x - ring[0].x, z - ring[0].z) \
-                    <= ring[2]:
+            if ring is not None and not ring[1] <= math.dist((x, z), ring[0]) <= ring[2]:
                 continue
             if any((x - dx) ** 2 + (z - dz) ** 2 < door_clearance ** 2 for dx, dz in doors):
                 continue

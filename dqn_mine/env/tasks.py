@@ -27,14 +27,15 @@ has phases 1-6 built the same way (see ``TWO_ROOM_PHASES`` and below):
 in room 0 holding that boulder; 4 the doorway cleared; 5 the agent in room 1 (the one-room problem
 there); 6 the agent in room 1 carrying the kit.
 
-``three-room`` with ``boulder_phases=True`` (eighteen phases, the study's six renumbered 18,
-17, 16, 13, 7, 1): 1 the full task; 2 the agent in room 0, 2-4 units from the boulder of doorway
+``three-room`` with ``boulder_phases=True`` (twenty phases, the study's six renumbered 20,
+19, 18, 15, 8, 1): 1 the full task; 2 the agent in room 0, 2-4 units from the boulder of doorway
 0-1; 3 in room 0 facing that boulder within reach; 4 in room 0 holding it; 5 in room 0 with
-doorway 0-1 cleared; 6 in room 1 holding the boulder of doorway 0-1; 7 the study's phase 2; 8 in
-room 1, 2-4 units from the boulder of doorway 1-2 (doorway 0-1 cleared); 9 in room 1 facing that
-boulder within reach; 10 in room 1 holding it; 11 in room 1 with both doorways cleared; 12 in
-room 2 holding the boulder of doorway 1-2; 13 the study's phase 3; 14 in room 2, 2-4 units from
-the kit (both doorways cleared); 15 facing the kit in reach and in view; 16-18 the study's phases
+doorway 0-1 cleared; 6 the same, 2-4 units from that doorway; 7 in room 1 holding the boulder of
+doorway 0-1; 8 the study's phase 2; 9 in room 1, 2-4 units from the boulder of doorway 1-2
+(doorway 0-1 cleared); 10 in room 1 facing that boulder within reach; 11 in room 1 holding it;
+12 in room 1 with both doorways cleared; 13 the same, 2-4 units from doorway 1-2; 14 in room 2
+holding the boulder of doorway 1-2; 15 the study's phase 3; 16 in room 2, 2-4 units from the kit
+(both doorways cleared); 17 facing the kit in reach and in view; 18-20 the study's phases
 4-6.
 """
 
@@ -64,6 +65,7 @@ class Phase:
     near_kit: bool = False          # the agent starts a few steps from the kit
     facing_boulder: bool = False    # the agent faces the next blocked doorway's boulder, in reach
     facing_kit: bool = False        # the agent faces the kit, in reach and in view
+    near_doorway: bool = False      # the agent starts a few steps from the last cleared doorway
 
 
 PHASES = {
@@ -88,10 +90,11 @@ TWO_ROOM_PHASES = {
     5: Phase(1, 1, False),
     6: Phase(1, 1, True),
 }
-# three-room with ``boulder_phases=True``: the study's six phases (here 18, 17, 16, 13, 7, 1) with
-# five steps inserted before each phase that must clear a doorway (as two-room's phases 4-2: the
-# doorway already cleared, its boulder in hand, a start facing it within reach, a start a few
-# steps from it; and, first, the boulder in hand one room further on), and starts facing the kit
+# three-room with ``boulder_phases=True``: the study's six phases (here 20, 19, 18, 15, 8, 1) with
+# six steps inserted before each phase that must clear a doorway (as two-room's phases 4-2: the
+# doorway already cleared, the same a few steps from the doorway, its boulder in hand, a start
+# facing it within reach, a start a few steps from it; and, first, the boulder in hand one room
+# further on), and starts facing the kit
 # and a few steps from it before the first phase that must take it. Each fixes a stall seen in a run
 # (docs/three_room.md): without the near-kit phase the agent that had only ever started with the
 # kit in hand left room 2 without it; without the cleared-doorway phases the step to "room 1
@@ -100,7 +103,10 @@ TWO_ROOM_PHASES = {
 # not know how to let go of it next to the kit (it wandered room 2 holding it for hundreds of
 # steps), hence the phases that start in the next room with the boulder still in hand; and an
 # agent that started 2-4 units from a boulder it had only ever held turned away from it (two runs
-# sat 36 minutes there), hence the start facing it, one press of action 4 from holding it. The
+# sat 36 minutes there), hence the start facing it, one press of action 4 from holding it; an
+# agent that delivered from room 1 8 times in 8 stayed in room 0 when it started anywhere there
+# with the doorway cleared (it had only been in the miner's room carrying the kit; two runs sat
+# 24 and 31 minutes there), hence the start a few steps from the cleared doorway. The
 # kit within reach is mostly below the view (the floor in view begins 2.6 units ahead): the
 # start facing it is placed where it still shows, and an agent that carries it home 8 times in 8
 # took it in 2 of 8 starts a few steps away.
@@ -108,21 +114,23 @@ TWO_ROOM_PHASES = {
 
 def _doorway_phases(door: int) -> list[Phase]:
     """The starts that teach clearing doorway ``door`` of the chain (0: rooms 0-1), hardest
-    first: 2-4 units from its boulder, facing it, holding it, it cleared, holding it one room
-    further on (all in room ``door`` but the last)."""
+    first: 2-4 units from its boulder, facing it, holding it, it cleared, it cleared and 2-4
+    units from it, holding its boulder one room further on (all in room ``door`` but the
+    last)."""
     return [Phase(door, door, False, near_boulder=True),
             Phase(door, door, False, facing_boulder=True),
             Phase(door, door, False, holding_boulder=True),
             Phase(door, door + 1, False),
+            Phase(door, door + 1, False, near_doorway=True),
             Phase(door + 1, door, False, holding_boulder=True)]
 
 
 THREE_ROOM_BOULDER_PHASES = dict(enumerate(
-    [Phase(0, 0, False)] + _doorway_phases(0)                      # 1 the full task, 2-6
-    + [Phase(1, 1, False)] + _doorway_phases(1)                    # 7 the study's 2, 8-12
-    + [Phase(2, 2, False), Phase(2, 2, False, near_kit=True),      # 13 the study's 3, 14
-       Phase(2, 2, False, facing_kit=True),                        # 15
-       Phase(2, 2, True), Phase(1, 2, True), Phase(0, 2, True)],   # 16-18 the study's 4-6
+    [Phase(0, 0, False)] + _doorway_phases(0)                      # 1 the full task, 2-7
+    + [Phase(1, 1, False)] + _doorway_phases(1)                    # 8 the study's 2, 9-14
+    + [Phase(2, 2, False), Phase(2, 2, False, near_kit=True),      # 15 the study's 3, 16
+       Phase(2, 2, False, facing_kit=True),                        # 17
+       Phase(2, 2, True), Phase(1, 2, True), Phase(0, 2, True)],   # 18-20 the study's 4-6
     start=1))
 NEAR_BOULDER = (2.0, 4.0)   # distance of the agent from the boulder (or kit) it starts near
 # Facing the kit: 1.75 units centre to centre, inside action 4's reach (to 1.95) and far enough
@@ -193,9 +201,13 @@ def _place_agent(env: MineRescueEnv, room: int, phase: Phase, boulders) -> None:
     elif phase.facing_boulder:
         env.place_agent_facing(room, boulders[phase.boulders_aside])
     elif phase.near_kit:
-        env.place_agent_near(room, env.kit, *NEAR_BOULDER)
+        env.place_agent_near(room, (env.kit.x, env.kit.z), *NEAR_BOULDER)
     elif phase.near_boulder:
-        env.place_agent_near(room, boulders[phase.boulders_aside], *NEAR_BOULDER)
+        boulder = boulders[phase.boulders_aside]
+        env.place_agent_near(room, (boulder.x, boulder.z), *NEAR_BOULDER)
+    elif phase.near_doorway:
+        env.place_agent_near(room, env.layout.doors[phase.boulders_aside - 1].center,
+                             *NEAR_BOULDER)
     else:
         env.place_agent(room)
 
