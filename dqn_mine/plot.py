@@ -226,7 +226,16 @@ def plot_band(runs: dict, configs: dict, out: Path, levels=(0.5, 0.9)) -> Path:
         ax.set_ylabel("full-task rolling return")
         ax.set_ylim(-0.03, 1.03)
         ax.grid(alpha=0.3)
+    _label_updates(axes[0])
     return _save(fig, axes[0], out, legend_size=7)
+
+
+def _label_updates(ax) -> None:
+    """Update counts as 50k, 100k, ...: six-digit tick labels run into each other."""
+    import matplotlib.ticker
+
+    ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(
+        lambda value, _: f"{value / 1000:g}k" if value else "0"))
 
 
 def _save(fig, legend_axis, out: Path, legend_size: int) -> Path:
@@ -275,6 +284,8 @@ def plot_runs(runs: dict, out: Path) -> Path:
         axes[2].set_xlabel("network updates")
         axes[2].set_ylabel("curriculum phase / room count")
         axes[2].yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
+        _label_updates(axes[2])
+    _label_updates(axes[0])
     for ax in axes:
         ax.grid(alpha=0.3)
     return _save(fig, axes[0], out, legend_size=8)
