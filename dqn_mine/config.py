@@ -36,6 +36,7 @@ PHASED_CURRICULA = ("adaptive", "uniform")   # those that start episodes in phas
 EXPLORATIONS = ("epsilon", "ez")
 REVIEW_PICKS = ("uniform", "nearest")
 REVIEW_UNITS = ("episodes", "steps")
+EPISODE_ORDERS = ("ended", "started")
 
 
 DIFFERENCES_KEY = "differs_from_preset"   # in config.json: what the flags changed
@@ -89,6 +90,12 @@ class Config:
                                      "switch, and randomises while its randomised episodes "
                                      "played fewer than that share of all its steps)",
                                      REVIEW_UNITS)
+    episode_order: str = _f("ended", "order in which a training actor reports its finished "
+                            "episodes (to the curriculum's window and the rolling returns): "
+                            "ended (as they end: right after a phase switch only the quick "
+                            "ones, mostly successes, have ended), or started (an episode is "
+                            "reported once every episode its actor started before it has "
+                            "ended)", EPISODE_ORDERS)
     curriculum_steps: Optional[int] = _f(None, "adaptive curriculum: step limit of episodes that "
                                          "start in a phase easier than the full task (none = "
                                          "the task's limit)")
@@ -360,7 +367,7 @@ def _choice_problems(c: Config) -> list[str]:
         p.append("--tensorboard needs the tensorboard package (pip install -e .[tb])")
     for name in ("task", "placement", "curriculum", "epsilon_schedule", "init_priority",
                  "device", "actor_precision", "learner_precision", "exploration",
-                 "curriculum_review_pick", "curriculum_review_unit"):
+                 "curriculum_review_pick", "curriculum_review_unit", "episode_order"):
         choices = _field(name).metadata["choices"]
         if getattr(c, name) not in choices:
             p.append(f"--{_flag(name)}: unknown value {getattr(c, name)!r} "

@@ -132,6 +132,7 @@ BAD = [
     (["--task", "three-room", "--curriculum-dr", "0.5"], "--curriculum-dr"),
     (["--preset", "cpu-three-room", "--curriculum-dr", "1.0"], "--curriculum-dr"),
     (["--curriculum-review-unit", "transitions"], "--curriculum-review-unit"),
+    (["--episode-order", "finished"], "--episode-order"),
     (["--task", "two-room", "--eval-num-rooms", "5"], "--eval-num-rooms"),
     (["--task", "rooms", "--eval-num-rooms", "13"], "--eval-num-rooms"),
     (["--bogus", "1"], "unrecognized"),

@@ -99,14 +99,21 @@ class ActorBase:
         self.returns[j], self.lengths[j] = 0.0, 0
 
     def _end_episode(self, j: int) -> None:
-        self.control.record_episode(self.spec.index, float(self.returns[j]),
-                                    int(self.lengths[j]), int(self.phases[j]),
-                                    is_eval=self.spec.evaluates,
-                                    epsilon=float(self.core.explorer.epsilon[j]))
+        record = (float(self.returns[j]), int(self.lengths[j]), int(self.phases[j]),
+                  float(self.core.explorer.epsilon[j]))
         self.episodes += 1
         self.between_episodes(j)
         self.apply_curriculum(j)
         self._begin(j, *self.envs[j].reset())
+        for ret, length, phase, epsilon in self.reported(j, record):
+            self.control.record_episode(self.spec.index, ret, length, phase,
+                                        is_eval=self.spec.evaluates, epsilon=epsilon)
+
+    def reported(self, j: int, record: tuple) -> list[tuple]:
+        """The finished episodes to report now that environment j's episode ended with
+        ``record`` and its next one began: that one (see :class:`StartOrder` for another
+        order)."""
+        return [record]
 
     def between_episodes(self, j: int) -> None:
         """What a kind of actor does after an episode of environment j ended, before the next."""
@@ -129,6 +136,29 @@ class ActorBase:
             env.close()
 
 
+class StartOrder:
+    """Reports an actor's finished episodes in the order they started: an episode is reported
+    once every episode the actor started before it has ended.
+
+    In the order they end, the first episodes after a phase switch are the quick ones (in a
+    2,000-step phase, for the first 2,000 steps only successes can end), and a window filled
+    then overstates the phase's success rate. In start order the window is the phase's first
+    episodes, whatever their length. The cost: a report waits up to one episode longer."""
+
+    def __init__(self, num_envs: int):
+        self.running = list(range(num_envs))    # start number of each env's current episode
+        self.next_start = num_envs
+        self.waiting: dict[int, tuple] = {}     # start number -> record of an ended episode
+
+    def ended(self, j: int, record) -> list:
+        """Env j's episode ended with ``record`` and its next one began: what to report now."""
+        self.waiting[self.running[j]] = record
+        self.running[j], self.next_start = self.next_start, self.next_start + 1
+        oldest = min(self.running)
+        ready = sorted(n for n in self.waiting if n < oldest)
+        return [self.waiting.pop(n) for n in ready]
+
+
 class Actor(ActorBase):
     """A training actor on ``len(spec.streams)`` environments, one replay stream each."""
 
@@ -140,7 +170,11 @@ class Actor(ActorBase):
         self.pace = ActorPace(cfg, control)
         super().__init__(cfg, spec, control, weights, training=True, parent_pid=parent_pid)
         self.writers = [NStepWriter(storage, stream=s, eta=cfg.eta) for s in spec.streams]
+        self.order = StartOrder(spec.num_envs) if cfg.episode_order == "started" else None
         self.start_envs()
+
+    def reported(self, j: int, record: tuple) -> list[tuple]:
+        return [record] if self.order is None else self.order.ended(j, record)
 
     def apply_curriculum(self, j: int) -> None:
         """Read the shared curriculum state and set it on environment j (the episode is recorded
