@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from dqn_mine.config import parse_args
+from dqn_mine.env.tasks import THREE_ROOM_BOULDER_PHASES
 from dqn_mine.system.curriculum import Curriculum
 from dqn_mine.system.specs import actor_specs, eval_env_kwargs
 
@@ -56,7 +57,7 @@ def test_three_room_preset_starts_at_the_easiest_boulder_phase_and_its_envs_know
     cfg = parse_args(["--preset", "cpu-three-room"])
     assert (cfg.task, cfg.boulder_phases, cfg.curriculum) == ("three-room", True, "adaptive")
     assert (cfg.curriculum_review, cfg.curriculum_review_unit) == (0.5, "steps")
-    assert Curriculum(cfg).phase == 20
+    assert Curriculum(cfg).phase == 22
     assert actor_specs(cfg)[0].env_kwargs["boulder_phases"] is True
     assert eval_env_kwargs(cfg)["boulder_phases"] is True    # harmless: it plays phase 1
     other = parse_args(["--preset", "cpu-three-room", "--eval-task", "two-room"])
@@ -319,11 +320,11 @@ def test_curriculum_dr_starts_a_share_of_episodes_as_the_randomised_full_task():
     cfg = parse_args(["--preset", "cpu-three-room", "--curriculum-dr", "0.3",
                       "--curriculum-review-unit", "episodes", "--curriculum-review", "0"])
     cur, rng = Curriculum(cfg), np.random.default_rng(0)
-    starts = [cur.episode_start(15, 0, rng) for _ in range(4_000)]
+    starts = [cur.episode_start(17, 0, rng) for _ in range(4_000)]
     dr = [settings for phase, settings in starts if phase == DR_PHASE]
     assert abs(len(dr) / len(starts) - 0.3) < 0.025
     assert all(s == {"phase": None, "placement": "any-room"} for s in dr)
-    assert all(s == {"phase": 15, "placement": "fixed"} for p, s in starts if p != DR_PHASE)
+    assert all(s == {"phase": 17, "placement": "fixed"} for p, s in starts if p != DR_PHASE)
     cur.played(DR_PHASE, 2_000)     # outside the review count
     assert cur.played_steps == 0
     # an actor's env built for the fixed task takes both kinds of start, episode by episode
@@ -337,7 +338,7 @@ def test_curriculum_dr_starts_a_share_of_episodes_as_the_randomised_full_task():
             rooms.add((info["agent_room"], info["kit_room"], info["miner_room"]))
             assert not info["carrying"]
         else:
-            assert info["agent_room"] == 2 and info["miner_room"] == 0   # phase 15: room 2
+            assert info["agent_room"] == 2 and info["miner_room"] == 0   # phase 17: room 2
     env.close()
     assert len(rooms) >= 4 and rooms != {(0, 2, 0)}
 
@@ -387,12 +388,13 @@ def test_uniform_curriculum_draws_every_phase_alike_and_never_switches():
     cfg = parse_args(["--preset", "cpu-three-room", "--curriculum", "uniform",
                       "--curriculum-window", "3", "--curriculum-steps", "1000"])
     cur, rng = Curriculum(cfg), np.random.default_rng(0)
-    assert (cur.phase, cur.easiest, cur.logged_phase) == (1, 20, 1)
-    starts = [cur.episode_start(cur.phase, 0, rng) for _ in range(20_000)]
-    counts = np.bincount([phase for phase, _ in starts], minlength=21)[1:]
+    n = len(THREE_ROOM_BOULDER_PHASES)
+    assert (cur.phase, cur.easiest, cur.logged_phase) == (1, n, 1)
+    starts = [cur.episode_start(cur.phase, 0, rng) for _ in range(1_000 * n)]
+    counts = np.bincount([phase for phase, _ in starts], minlength=n + 1)[1:]
     assert counts.min() > 850 and counts.max() < 1150      # 1,000 each, +-4.7 sigma
     limits = {phase: s["max_episode_steps"] for phase, s in starts}
-    assert limits[1] == 2000 and {limits[p] for p in range(2, 21)} == {1000}
+    assert limits[1] == 2000 and {limits[p] for p in range(2, n + 1)} == {1000}
     for ret in (1.0, 1.0, 1.0, 1.0):
         cur.record(1, ret)         # the full task's episodes make phase_return
     cur.record(7, 0.0)

@@ -508,7 +508,7 @@ def test_truncation_at_the_step_limit():
     (dict(task="one-room", phase=2), "three-room"),
     (dict(task="two-room", phase=7), "phase"),
     (dict(task="three-room", phase=2, placement="any-room"), "fixed"),
-    (dict(task="three-room", phase=21, boulder_phases=True), "phase"),
+    (dict(task="three-room", phase=23, boulder_phases=True), "phase"),
     (dict(task="two-room", boulder_phases=True), "boulder_phases"),
     (dict(render_mode="human"), "render_mode"),
     (dict(camera_pitch=-5.0), "camera_pitch"),

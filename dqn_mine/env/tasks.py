@@ -27,16 +27,14 @@ has phases 1-6 built the same way (see ``TWO_ROOM_PHASES`` and below):
 in room 0 holding that boulder; 4 the doorway cleared; 5 the agent in room 1 (the one-room problem
 there); 6 the agent in room 1 carrying the kit.
 
-``three-room`` with ``boulder_phases=True`` (twenty phases, the study's six renumbered 20,
-19, 18, 15, 8, 1): 1 the full task; 2 the agent in room 0, 2-4 units from the boulder of doorway
+``three-room`` with ``boulder_phases=True`` (twenty-two phases, the study's six renumbered 22,
+21, 20, 17, 9, 1): 1 the full task; 2 the agent in room 0, 2-4 units from the boulder of doorway
 0-1; 3 in room 0 facing that boulder within reach; 4 in room 0 holding it; 5 in room 0 with
-doorway 0-1 cleared; 6 the same, 2-4 units from that doorway; 7 in room 1 holding the boulder of
-doorway 0-1; 8 the study's phase 2; 9 in room 1, 2-4 units from the boulder of doorway 1-2
-(doorway 0-1 cleared); 10 in room 1 facing that boulder within reach; 11 in room 1 holding it;
-12 in room 1 with both doorways cleared; 13 the same, 2-4 units from doorway 1-2; 14 in room 2
-holding the boulder of doorway 1-2; 15 the study's phase 3; 16 in room 2, 2-4 units from the kit
-(both doorways cleared); 17 facing the kit in reach and in view; 18-20 the study's phases
-4-6.
+doorway 0-1 cleared; 6 in room 0 holding that boulder, 2-4 units from its doorway; 7 in room 0,
+2-4 units from that doorway cleared; 8 in room 1 holding the boulder of doorway 0-1; 9 the
+study's phase 2; 10-16 the same seven starts for doorway 1-2 (doorway 0-1 cleared; 16 in room 2
+holding its boulder); 17 the study's phase 3; 18 in room 2, 2-4 units from the kit (both
+doorways cleared); 19 facing the kit in reach and in view; 20-22 the study's phases 4-6.
 """
 
 from __future__ import annotations
@@ -90,8 +88,8 @@ TWO_ROOM_PHASES = {
     5: Phase(1, 1, False),
     6: Phase(1, 1, True),
 }
-# three-room with ``boulder_phases=True``: the study's six phases (here 20, 19, 18, 15, 8, 1) with
-# six steps inserted before each phase that must clear a doorway (as two-room's phases 4-2: the
+# three-room with ``boulder_phases=True``: the study's six phases (here 22, 21, 20, 17, 9, 1) with
+# seven steps inserted before each phase that must clear a doorway (as two-room's phases 4-2: the
 # doorway already cleared, the same a few steps from the doorway, its boulder in hand, a start
 # facing it within reach, a start a few steps from it; and, first, the boulder in hand one room
 # further on), and starts facing the kit
@@ -106,7 +104,10 @@ TWO_ROOM_PHASES = {
 # sat 36 minutes there), hence the start facing it, one press of action 4 from holding it; an
 # agent that delivered from room 1 8 times in 8 stayed in room 0 when it started anywhere there
 # with the doorway cleared (it had only been in the miner's room carrying the kit; two runs sat
-# 24 and 31 minutes there), hence the start a few steps from the cleared doorway. The
+# 24 and 31 minutes there), hence the start a few steps from the cleared doorway; an agent
+# that started anywhere in room 0 holding the boulder put it down and took it up again (a
+# boulder just put down looks like one the facing phases reward taking; 32 minutes there),
+# hence the start holding it a few steps from its doorway, as after taking it. The
 # kit within reach is mostly below the view (the floor in view begins 2.6 units ahead): the
 # start facing it is placed where it still shows, and an agent that carries it home 8 times in 8
 # took it in 2 of 8 starts a few steps away.
@@ -114,23 +115,24 @@ TWO_ROOM_PHASES = {
 
 def _doorway_phases(door: int) -> list[Phase]:
     """The starts that teach clearing doorway ``door`` of the chain (0: rooms 0-1), hardest
-    first: 2-4 units from its boulder, facing it, holding it, it cleared, it cleared and 2-4
-    units from it, holding its boulder one room further on (all in room ``door`` but the
-    last)."""
+    first: 2-4 units from its boulder, facing it, holding it, it cleared, holding it 2-4 units
+    from the doorway, it cleared and 2-4 units from the doorway, holding its boulder one room
+    further on (all in room ``door`` but the last)."""
     return [Phase(door, door, False, near_boulder=True),
             Phase(door, door, False, facing_boulder=True),
             Phase(door, door, False, holding_boulder=True),
             Phase(door, door + 1, False),
+            Phase(door, door, False, holding_boulder=True, near_doorway=True),
             Phase(door, door + 1, False, near_doorway=True),
             Phase(door + 1, door, False, holding_boulder=True)]
 
 
 THREE_ROOM_BOULDER_PHASES = dict(enumerate(
-    [Phase(0, 0, False)] + _doorway_phases(0)                      # 1 the full task, 2-7
-    + [Phase(1, 1, False)] + _doorway_phases(1)                    # 8 the study's 2, 9-14
-    + [Phase(2, 2, False), Phase(2, 2, False, near_kit=True),      # 15 the study's 3, 16
-       Phase(2, 2, False, facing_kit=True),                        # 17
-       Phase(2, 2, True), Phase(1, 2, True), Phase(0, 2, True)],   # 18-20 the study's 4-6
+    [Phase(0, 0, False)] + _doorway_phases(0)                      # 1 the full task, 2-8
+    + [Phase(1, 1, False)] + _doorway_phases(1)                    # 9 the study's 2, 10-16
+    + [Phase(2, 2, False), Phase(2, 2, False, near_kit=True),      # 17 the study's 3, 18
+       Phase(2, 2, False, facing_kit=True),                        # 19
+       Phase(2, 2, True), Phase(1, 2, True), Phase(0, 2, True)],   # 20-22 the study's 4-6
     start=1))
 NEAR_BOULDER = (2.0, 4.0)   # distance of the agent from the boulder (or kit) it starts near
 # Facing the kit: 1.75 units centre to centre, inside action 4's reach (to 1.95) and far enough
@@ -206,10 +208,15 @@ def _place_agent(env: MineRescueEnv, room: int, phase: Phase, boulders) -> None:
         boulder = boulders[phase.boulders_aside]
         env.place_agent_near(room, (boulder.x, boulder.z), *NEAR_BOULDER)
     elif phase.near_doorway:
-        env.place_agent_near(room, env.layout.doors[phase.boulders_aside - 1].center,
-                             *NEAR_BOULDER)
+        env.place_agent_near(room, env.layout.doors[_last_cleared(phase)].center, *NEAR_BOULDER)
     else:
         env.place_agent(room)
+
+
+def _last_cleared(phase: Phase) -> int:
+    """The doorway (chain index) that ``phase`` cleared last: the held boulder's, else the last
+    one moved aside."""
+    return phase.boulders_aside if phase.holding_boulder else phase.boulders_aside - 1
 
 
 def _rooms(env: MineRescueEnv) -> None:

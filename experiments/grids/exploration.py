@@ -24,7 +24,7 @@ SCALES = {
                       "12,000 updates, 1 actor and the evaluation actor, one seed; the full "
                       "task is far out of reach at this budget, watch the curriculum phase"},
     # The cpu preset's exploration on the full three-room; only the curriculum uses phases
-    # (its twenty boulder phases and review by steps, as the cpu-three-room preset).
+    # (its twenty-two boulder phases and review by steps, as the cpu-three-room preset).
     "cpu": {"base": {**CPU, "task": "three-room", "minutes": CPU_MINUTES},
             "override": {"baseline": {"curriculum": "none"},
                          "curriculum": CPU_PHASES,
