@@ -267,10 +267,10 @@ class MineRescueEnv(MineEnv):
         placement: "fixed" or "any-room" (domain randomisation of the start rooms).
         phase: curriculum phase 1..6 of ``three-room`` or 1..6 of ``two-room`` (1 = the full
             task), or None.
-        boulder_phases: ``three-room`` only: phases 1..20, the six with starts near each
-            blocked doorway, facing its boulder, holding it (in its room and in the next), with
-            it cleared (anywhere and near it), and near and facing the kit inserted (see
-            ``phase_table``).
+        boulder_phases: ``three-room`` only: phases 1..22, the study's six with starts near
+            each blocked doorway, facing its boulder, holding it (anywhere in its room, near its
+            doorway, and in the next room), with it cleared (anywhere and near it), and near
+            and facing the kit inserted (see ``phase_table``).
         render_mode: None or "rgb_array" (first-person view and map side by side).
         randomise_visuals: draw the light level, the wall colour and the field of view anew each
             episode (visual domain randomisation; the layout of a seed does not change).
