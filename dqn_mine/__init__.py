@@ -10,7 +10,8 @@ _register_envs()
 def load_agent(path, epsilon: float = 0.0, seed: int = 0, unstick: bool = False):
     """A trained agent from a run folder or ``checkpoint.pt``: ``agent.predict(obs, info)`` gives
     an action, ``agent.reset()`` starts an episode. ``unstick``: a random action after a step
-    that left the frame unchanged, as the training actors of ``--unstick`` act. A missing or
+    that left the frame unchanged (or, with the run's ``--unstick-cycle`` k, brought back one of
+    the last k frames), as the training actors of ``--unstick`` act. A missing or
     corrupt checkpoint raises ``CheckpointError`` (a ValueError) with a one-line message."""
     from dqn_mine.agent.policy import AgentPolicy
 

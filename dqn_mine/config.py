@@ -122,6 +122,10 @@ class Config:
                           "duration (motions only)", EXPLORATIONS)
     unstick: bool = _f(False, "a step after which the frame did not change is followed by a "
                        "random action, as if epsilon had fired (training actors only)")
+    unstick_cycle: int = _f(1, "with --unstick (and --eval-unstick): a step counts as stuck "
+                            "when its frame is one of the last N frames (1: the frame did not "
+                            "change; 2: also a frame two steps back came back, as when the "
+                            "agent puts a boulder down and takes it up again)")
     ez_mu: float = _f(2.0, "ez exploration: durations n drawn with p(n) ~ n**-mu")
     ez_max_duration: int = _f(100, "ez exploration: longest duration of a held random action")
     prefill: int = _f(50_000, "environment steps per actor before the learner starts")
@@ -344,10 +348,14 @@ PRESETS: dict[str, dict[str, Any]] = {
 # Each room's floor has a colour of its own: room 1's two open doorways look alike otherwise,
 # and the agent that had to go on to room 2 went back to room 0 (the miner's room, where it had
 # always gone carrying the kit); with the colours the phase from room 1 took 9 and 12 minutes
-# instead of 29 and 36, seeds 0 and 1 (docs/three_room.md).
+# instead of 29 and 36, seeds 0 and 1 (docs/three_room.md). Unsticking also breaks loops of two
+# frames: holding a boulder the greedy policy put it down and took it up again for the last 39
+# of 62 minutes on seed 6 (room 1 holding boulder 0-1); with --unstick-cycle 2 the same phase
+# passed in 12 minutes (docs/three_room.md).
 PRESETS["cpu-three-room"] = {**PRESETS["cpu"], "task": "three-room", "boulder_phases": True,
                              "curriculum_review": 0.5, "curriculum_review_unit": "steps",
-                             "updates": 600_000, "camera_pitch": 15.0, "room_colours": True}
+                             "updates": 600_000, "camera_pitch": 15.0, "room_colours": True,
+                             "unstick_cycle": 2}
 
 
 # -- validation --------------------------------------------------------------------------------
@@ -389,7 +397,7 @@ def _bound_problems(c: Config) -> list[str]:
     at_least = {"actors": 1, "envs_per_actor": 1, "n_step": 1, "batch_size": 1, "frame_stack": 1,
                 "history_len": 0, "prefill": 0, "updates": 1, "target_update_interval": 1,
                 "publish_interval": 1, "learner_queue": 1, "learner_threads": 0, "eval_every": 0,
-                "eval_video_every": 0, "ez_max_duration": 1,
+                "eval_video_every": 0, "ez_max_duration": 1, "unstick_cycle": 1,
                 "eval_episodes": 1, "checkpoint_interval": 1, "log_interval": 1,
                 "curriculum_window": 1, "return_window": 1, "seed": 0}
     for name, low in at_least.items():

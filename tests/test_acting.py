@@ -20,11 +20,11 @@ def frame(value: int) -> np.ndarray:
     return np.full(FRAME_SHAPE, value, dtype=np.uint8)
 
 
-def core_of(num_envs=2, frame_stack=3, history_len=4, unstick=False) -> ActingCore:
+def core_of(num_envs=2, frame_stack=3, history_len=4, unstick=False, cycle=1) -> ActingCore:
     torch.manual_seed(0)
     net = DuelingQNetwork(frame_stack=frame_stack, history_len=history_len).eval()
     explorer = Explorer(0.0, num_envs, np.random.default_rng(0), unstick=unstick)
-    return ActingCore(net, explorer, num_envs, frame_stack, history_len)
+    return ActingCore(net, explorer, num_envs, frame_stack, history_len, unstick_cycle=cycle)
 
 
 def test_frames_and_actions_are_kept_oldest_first_and_reset_per_episode():
@@ -49,6 +49,43 @@ def test_an_unchanged_frame_counts_as_stuck_only_when_unsticking():
     assert not plain.stuck[0] and unstick.stuck[0]
     unstick.observe(0, 0, frame(6), carrying=False)
     assert not unstick.stuck[0]
+
+
+@pytest.mark.parametrize("cycle", [1, 2, 3])
+def test_a_frame_back_within_the_cycle_counts_as_stuck(cycle):
+    """Frames 5, 6, 5, 7, 8, 9, 7: the second 5 closes a loop of two steps, the second 7 one of
+    three; a loop counts when it is no longer than the cycle. A new episode forgets the old."""
+    core = core_of(frame_stack=1, unstick=True, cycle=cycle)
+    core.begin(0, frame(5), carrying=False)
+    stuck = []
+    for value in (6, 5, 7, 8, 9, 7):
+        core.observe(0, 0, frame(value), carrying=False)
+        stuck.append(bool(core.stuck[0]))
+    assert stuck == [False, cycle >= 2, False, False, False, cycle >= 3]
+    core.begin(0, frame(9), carrying=False)
+    core.observe(0, 0, frame(7), carrying=False)
+    assert not core.stuck[0]
+    core.observe(0, 0, frame(7), carrying=False)
+    assert core.stuck[0]
+
+
+def test_putting_a_held_boulder_down_and_up_again_is_a_two_step_loop():
+    """In the real mine, action 4 pressed again and again while holding a boulder puts it down
+    and takes it up: the frames alternate, which a cycle of 2 catches and a cycle of 1 misses."""
+    env = MineRescueEnv(task="three-room", phase=8, boulder_phases=True)
+    obs, info = env.reset(seed=3)
+    assert info["carrying"]
+    cores = {k: core_of(num_envs=1, frame_stack=1, unstick=True, cycle=k) for k in (1, 2)}
+    for core in cores.values():
+        core.begin(0, obs, info["carrying"])
+    stuck = {1: [], 2: []}
+    for _ in range(4):
+        obs, _, _, _, info = env.step(4)
+        for k, core in cores.items():
+            core.observe(0, 4, obs, info["carrying"])
+            stuck[k].append(bool(core.stuck[0]))
+    env.close()
+    assert stuck == {1: [False] * 4, 2: [False, True, True, True]}
 
 
 def test_greedy_actions_come_from_one_batched_forward_pass():

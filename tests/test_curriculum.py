@@ -57,6 +57,8 @@ def test_three_room_preset_starts_at_the_easiest_boulder_phase_and_its_envs_know
     cfg = parse_args(["--preset", "cpu-three-room"])
     assert (cfg.task, cfg.boulder_phases, cfg.curriculum) == ("three-room", True, "adaptive")
     assert (cfg.curriculum_review, cfg.curriculum_review_unit) == (0.5, "steps")
+    assert (cfg.unstick, cfg.eval_unstick, cfg.unstick_cycle) == (True, True, 2)
+    assert parse_args(["--preset", "cpu"]).unstick_cycle == 1   # two-room's results keep theirs
     assert Curriculum(cfg).phase == 22
     assert actor_specs(cfg)[0].env_kwargs["boulder_phases"] is True
     assert eval_env_kwargs(cfg)["boulder_phases"] is True    # harmless: it plays phase 1

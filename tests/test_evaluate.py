@@ -26,7 +26,8 @@ def run_dir(tmp_path_factory) -> Path:
     res = subprocess.run(
         [sys.executable, "-m", "dqn_mine.train", "--preset", "smoke", "--serial", "--actors", "1",
          "--updates", "20", "--prefill", "100", "--replay-capacity", "2048", "--no-progress",
-         "--run-dir", str(run)], cwd=ROOT, capture_output=True, text=True, timeout=300)
+         "--unstick-cycle", "2", "--run-dir", str(run)],
+        cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-2000:]
     return run
 
@@ -79,6 +80,12 @@ def test_load_agent_plays_an_episode_like_the_readme(run_dir):
     assert actions[0] == actions[1]          # greedy, same seed: the same episode
     history = agent.core.histories[0]           # what the network was fed last
     assert history.dtype == np.int8 and len(history) == 20
+
+
+def test_an_unsticking_agent_keeps_the_runs_cycle(run_dir):
+    """The run was configured with --unstick-cycle 2: its agent counts the same loops as stuck."""
+    assert dqn_mine.load_agent(run_dir, unstick=True).core.recent.shape[1] == 2
+    assert dqn_mine.load_agent(run_dir).core.recent.shape[1] == 0   # not unsticking: no frames
 
 
 def test_outcomes_say_what_the_agent_held_at_the_end():

@@ -209,6 +209,7 @@ def test_bump_and_press_presses_at_obstacles_and_seldom_idles():
     (["--exploration", "levy"], "exploration"),
     (["--ez-mu", "1.0"], "ez-mu"),
     (["--ez-max-duration", "0"], "ez-max-duration"),
+    (["--unstick-cycle", "0"], "unstick-cycle"),
 ])
 def test_bad_exploration_flags_are_one_line_errors(argv, match):
     from dqn_mine.config import ConfigError, parse_args

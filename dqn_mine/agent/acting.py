@@ -25,13 +25,17 @@ class ActingCore:
     """Per-environment inputs of the network, the batched Q values and the action choice."""
 
     def __init__(self, net: torch.nn.Module, explorer: Explorer, num_envs: int,
-                 frame_stack: int, history_len: int):
+                 frame_stack: int, history_len: int, unstick_cycle: int = 1):
         self.net, self.explorer = net, explorer
         c, h, w = FRAME_SHAPE
         self.stacks = np.zeros((num_envs, frame_stack * c, h, w), dtype=np.uint8)  # [E, 3f, H, W]
         self.histories = np.full((num_envs, history_len), -1, dtype=np.int8)      # [E, h]
         self.carrying = np.zeros(num_envs, dtype=np.float32)                       # [E]
-        self.stuck = np.zeros(num_envs, dtype=bool)   # frame unchanged by the last step  [E]
+        # With unstick: the last ``unstick_cycle`` frames, oldest first, and whether the frame
+        # a step brought is one of them (a loop of that many steps or fewer).
+        self.recent = np.zeros((num_envs, unstick_cycle if explorer.unstick else 0, c, h, w),
+                               dtype=np.uint8)                                     # [E, k, 3, H, W]
+        self.stuck = np.zeros(num_envs, dtype=bool)                                # [E]
 
     # -- what the network sees -----------------------------------------------------------------
     def begin(self, j: int, obs: np.ndarray, carrying: bool) -> None:
@@ -39,14 +43,17 @@ class ActingCore:
         self.stacks[j] = 0
         self.histories[j] = -1
         self.stuck[j] = False
+        self.recent[j] = obs   # before the episode only its first frame has been seen
         self.explorer.reset(j)
         self._push_frame(j, obs)
         self.carrying[j] = float(carrying)
 
     def observe(self, j: int, action: int, obs: np.ndarray, carrying: bool) -> None:
         """Environment ``j`` took ``action`` and now shows ``obs``."""
-        if self.explorer.unstick:   # compared only when used: a full-frame comparison per step
-            self.stuck[j] = np.array_equal(obs, self.stacks[j, -obs.shape[0]:])
+        if self.explorer.unstick:   # compared only when used: full-frame comparisons per step
+            self.stuck[j] = bool((self.recent[j] == obs).all(axis=(1, 2, 3)).any())
+            self.recent[j, :-1] = self.recent[j, 1:]
+            self.recent[j, -1] = obs
         self._push_frame(j, obs)
         self.carrying[j] = float(carrying)
         if self.histories.shape[1]:

@@ -13,6 +13,10 @@ into a wall or an entity and stays there: half of its steps are spent so in the 
 epsilon 0.01 turns it away only every few hundred steps. With ``unstick`` a step after which the
 frame did not change starts a random action (held like an epsilon one) as if epsilon had fired.
 The test uses only what the agent sees, and a policy that does not get stuck never triggers it.
+A greedy policy can also loop over two frames: holding a boulder it puts it down, facing it
+within reach it takes it up, and so on to the step limit (a left turn undone by a right one is
+the same kind of loop). With ``unstick_cycle`` k (kept by :class:`ActingCore`, which compares
+the frames) a frame equal to any of the last k counts as stuck.
 """
 
 from __future__ import annotations

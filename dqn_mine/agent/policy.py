@@ -23,13 +23,14 @@ class AgentPolicy:
     """
 
     def __init__(self, net: DuelingQNetwork, frame_stack: int, history_len: int,
-                 epsilon: float = 0.0, seed: int = 0, unstick: bool = False):
+                 epsilon: float = 0.0, seed: int = 0, unstick: bool = False,
+                 unstick_cycle: int = 1):
         self.net = net.eval()
         self.frame_stack, self.history_len = frame_stack, history_len
         self.epsilon = epsilon
         self.rng = np.random.default_rng(seed)
         explorer = Explorer(epsilon, 1, self.rng, unstick=unstick)
-        self.core = ActingCore(self.net, explorer, 1, frame_stack, history_len)
+        self.core = ActingCore(self.net, explorer, 1, frame_stack, history_len, unstick_cycle)
         self.last_action: int | None = None   # None: the next observation starts an episode
 
     @classmethod
@@ -47,7 +48,9 @@ class AgentPolicy:
         except (RuntimeError, TypeError) as exc:  # wrong or damaged tensors
             raise ckpt.CheckpointError(f"{path}: the network weights do not fit "
                                        f"({str(exc).splitlines()[0]})") from None
-        return cls(net, shape["frame_stack"], shape["history_len"], epsilon, seed, unstick)
+        # unstick as the run's actors did: the same loop length counts as stuck
+        cycle = state["config"].get("unstick_cycle", 1)
+        return cls(net, shape["frame_stack"], shape["history_len"], epsilon, seed, unstick, cycle)
 
     def reset(self) -> None:
         self.last_action = None
@@ -57,7 +60,7 @@ class AgentPolicy:
 
     def predict(self, obs: np.ndarray, info: dict | None = None) -> int:
         """The action for ``obs`` (uint8 [3, H, W]); greedy unless ``epsilon`` > 0 (or, with
-        ``unstick``, the last step left the frame unchanged)."""
+        ``unstick``, the last step left the frame unchanged or looped back to a recent one)."""
         carrying = bool((info or {}).get("carrying", False))
         if self.last_action is None:
             self.core.begin(0, obs, carrying)

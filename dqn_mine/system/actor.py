@@ -51,7 +51,7 @@ class ActorBase:
         self.envs = [MineRescueEnv(**spec.env_kwargs, render_mode=render_mode)
                      for _ in range(spec.num_envs)]
         self.core = ActingCore(self.net, explorer, spec.num_envs, cfg.frame_stack,
-                               cfg.history_len)
+                               cfg.history_len, cfg.unstick_cycle)
         self.returns = np.zeros(spec.num_envs)
         self.lengths = np.zeros(spec.num_envs, dtype=np.int64)
         self.phases = np.zeros(spec.num_envs, dtype=np.int64)   # each episode's start phase
