@@ -71,7 +71,8 @@ def test_a_frame_back_within_the_cycle_counts_as_stuck(cycle):
 
 def test_putting_a_held_boulder_down_and_up_again_is_a_two_step_loop():
     """In the real mine, action 4 pressed again and again while holding a boulder puts it down
-    and takes it up: the frames alternate, which a cycle of 2 catches and a cycle of 1 misses."""
+    and takes it up: the frames alternate, which a cycle of 2 catches and a cycle of 1 misses.
+    So does a left turn undone by a right one."""
     env = MineRescueEnv(task="three-room", phase=8, boulder_phases=True)
     obs, info = env.reset(seed=3)
     assert info["carrying"]
@@ -79,13 +80,13 @@ def test_putting_a_held_boulder_down_and_up_again_is_a_two_step_loop():
     for core in cores.values():
         core.begin(0, obs, info["carrying"])
     stuck = {1: [], 2: []}
-    for _ in range(4):
-        obs, _, _, _, info = env.step(4)
+    for action in (4, 4, 4, 4, 0, 2, 3):   # down, up, down, up; a step; left, right
+        obs, _, _, _, info = env.step(action)
         for k, core in cores.items():
-            core.observe(0, 4, obs, info["carrying"])
+            core.observe(0, action, obs, info["carrying"])
             stuck[k].append(bool(core.stuck[0]))
     env.close()
-    assert stuck == {1: [False] * 4, 2: [False, True, True, True]}
+    assert stuck == {1: [False] * 7, 2: [False, True, True, True, False, False, True]}
 
 
 def test_greedy_actions_come_from_one_batched_forward_pass():
