@@ -91,10 +91,9 @@ TWO_ROOM_PHASES = {
 # three-room with ``boulder_phases=True``: the study's six phases (here 22, 21, 20, 17, 9, 1) with
 # seven steps inserted before each phase that must clear a doorway (as two-room's phases 4-2: the
 # doorway already cleared, the same a few steps from the doorway, its boulder in hand there, its
-# boulder in hand anywhere in the room, a start
-# facing it within reach, a start a few steps from it; and, first, the boulder in hand one room
-# further on), and starts facing the kit
-# and a few steps from it before the first phase that must take it. Each fixes a stall seen in a run
+# boulder in hand anywhere in the room, a start facing it within reach, a start a few steps from
+# it; and, first, the boulder in hand one room further on), and starts facing the kit and a few
+# steps from it before the first phase that must take it. Each fixes a stall seen in a run
 # (docs/three_room.md): without the near-kit phase the agent that had only ever started with the
 # kit in hand left room 2 without it; without the cleared-doorway phases the step to "room 1
 # holding the boulder of doorway 1-2" asked for two new skills at once and never passed; an agent
