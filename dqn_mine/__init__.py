@@ -7,12 +7,16 @@ from dqn_mine.env import register_envs as _register_envs
 _register_envs()
 
 
-def load_agent(path, epsilon: float = 0.0, seed: int = 0, unstick: bool = False):
+def load_agent(path, epsilon: float = 0.0, seed: int = 0, unstick: bool = False,
+               held: bool = False):
     """A trained agent from a run folder or ``checkpoint.pt``: ``agent.predict(obs, info)`` gives
     an action, ``agent.reset()`` starts an episode. ``unstick``: a random action after a step
     that left the frame unchanged (or, with the run's ``--unstick-cycle`` k, brought back one of
-    the last k frames), as the training actors of ``--unstick`` act. A missing or
-    corrupt checkpoint raises ``CheckpointError`` (a ValueError) with a one-line message."""
+    the last k frames), as the training actors of ``--unstick`` act. ``held``: random actions
+    (epsilon's and unstick's) held for the run's ez durations, as its training actors hold them.
+    A missing or corrupt checkpoint raises ``CheckpointError`` (a ValueError) with a one-line
+    message."""
     from dqn_mine.agent.policy import AgentPolicy
 
-    return AgentPolicy.from_checkpoint(path, epsilon=epsilon, seed=seed, unstick=unstick)
+    return AgentPolicy.from_checkpoint(path, epsilon=epsilon, seed=seed, unstick=unstick,
+                                       held=held)

@@ -148,7 +148,7 @@ def main(argv=None) -> int:
         from dqn_mine import load_agent
 
         agent = load_agent(args.checkpoint, epsilon=args.epsilon, seed=args.seed,
-                           unstick=args.unstick)
+                           unstick=args.unstick, held=args.held)
         fill_env_settings(args)
         env = make_env(args)
     except ValueError as exc:  # bad settings, or CheckpointError (a ValueError)
@@ -161,7 +161,7 @@ def main(argv=None) -> int:
             save_video(every_nth(frames, args.video_stride), Path(args.video), 15.0)
     finally:
         env.close()
-    scores.update(task=args.task, epsilon=args.epsilon, unstick=args.unstick,
+    scores.update(task=args.task, epsilon=args.epsilon, unstick=args.unstick, held=args.held,
                   checkpoint=str(args.checkpoint))
     out = output_path(args)
     out.parent.mkdir(parents=True, exist_ok=True)

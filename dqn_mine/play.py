@@ -39,7 +39,7 @@ def agent_policy(args: argparse.Namespace) -> Policy:
     from dqn_mine.agent.policy import AgentPolicy
 
     return AgentPolicy.from_checkpoint(args.checkpoint, epsilon=args.epsilon, seed=args.seed,
-                                       unstick=args.unstick)
+                                       unstick=args.unstick, held=args.held)
 
 
 POLICIES: dict[str, Callable[[argparse.Namespace], Policy]] = {
@@ -50,10 +50,12 @@ POLICIES: dict[str, Callable[[argparse.Namespace], Policy]] = {
 
 # Environment settings play takes from a checkpoint's config unless given on the command line.
 ENV_DEFAULTS = {"task": "two-room", "room_size": 16.0, "placement": "fixed", "num_rooms": None,
-                "max_steps": None, "room_colours": False, "camera_pitch": 0.0}
+                "max_steps": None, "room_colours": False, "camera_pitch": 0.0,
+                "held_on_top": False}
 CONFIG_KEYS = {"task": "task", "room_size": "room_size", "placement": "placement",
                "num_rooms": "num_rooms", "max_steps": "max_episode_steps",
-               "room_colours": "room_colours", "camera_pitch": "camera_pitch"}
+               "room_colours": "room_colours", "camera_pitch": "camera_pitch",
+               "held_on_top": "held_on_top"}
 
 
 def fill_env_settings(args: argparse.Namespace) -> None:
@@ -88,6 +90,8 @@ def make_env(args: argparse.Namespace):
         kwargs["room_colours"] = True
     if args.camera_pitch:
         kwargs["camera_pitch"] = args.camera_pitch
+    if args.held_on_top:
+        kwargs["held_on_top"] = True
     if args.max_steps is not None:
         kwargs["max_episode_steps"] = args.max_steps
     return MineRescueEnv(**kwargs)
@@ -135,6 +139,8 @@ def add_episode_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--epsilon", type=float, default=0.0, help="agent's exploration rate")
     ap.add_argument("--unstick", action="store_true", help="agent: a random action after a step "
                     "that left the frame unchanged (as training actors with --unstick act)")
+    ap.add_argument("--held", action="store_true", help="agent: random actions (epsilon's and "
+                    "--unstick's) held as the run's ez training actors hold them")
     ap.add_argument("--task", default=None, help="one-room, two-room, three-room or rooms "
                     "(default: the checkpoint's, else two-room, as for train)")
     ap.add_argument("--num-rooms", type=int, default=None,
@@ -152,6 +158,9 @@ def add_episode_arguments(ap: argparse.ArgumentParser) -> None:
                          "else off)")
     ap.add_argument("--camera-pitch", type=float, default=None,
                     help="degrees the camera looks down, 0..30 (default: the checkpoint's, else 0)")
+    ap.add_argument("--held-on-top", action=argparse.BooleanOptionalAction, default=None,
+                    help="the carried item drawn over the world (default: the checkpoint's, "
+                         "else off)")
     ap.add_argument("--seed", type=int, default=0, help="episode seed (the first one)")
     ap.add_argument("--max-steps", type=int, default=None, help="step limit (default: the task's)")
 

@@ -120,18 +120,19 @@ def test_unstick_turns_a_stuck_greedy_policy_random_only_while_stuck(noop_networ
 
 def test_evaluation_actor_unsticks_only_with_eval_unstick():
     """The training actors' --unstick does not reach the evaluation actor; --eval-unstick does,
-    and held ez actions never do."""
+    and held ez actions only with --eval-held."""
     base = dataclasses.replace(Config(**PRESETS["cpu"], preset="cpu"), actors=1,
                                envs_per_actor=1, replay_capacity=4096, eval_every=1000,
                                eval_episodes=1)
     net = DuelingQNetwork(frame_stack=base.frame_stack, history_len=base.history_len)
-    for eval_unstick in (False, True):
-        cfg = dataclasses.replace(base, eval_unstick=eval_unstick).validate()
+    for eval_unstick, eval_held in ((False, False), (True, False), (True, True)):
+        cfg = dataclasses.replace(base, eval_unstick=eval_unstick, eval_held=eval_held).validate()
         with _run_blocks(cfg, net) as (blocks, weights):
             actor = EvalActor(cfg, actor_specs(cfg)[-1], Control(blocks), weights)
             try:
                 explorer = actor.core.explorer
-                assert explorer.unstick is eval_unstick and not explorer.durations
+                assert explorer.unstick is eval_unstick and explorer.durations is eval_held
+                assert (explorer.mu, explorer.max_duration) == (cfg.ez_mu, cfg.ez_max_duration)
                 assert list(explorer.epsilon) == [cfg.eval_epsilon]
             finally:
                 actor.close()

@@ -106,6 +106,7 @@ BAD = [
     (["--camera-pitch", "31"], "--camera-pitch"),
     (["--epsilon", "2"], "--epsilon"),
     (["--eval-epsilon", "-1"], "--eval-epsilon"),
+    (["--eval-held"], "--eval-held"),          # the study's epsilon exploration holds nothing
     (["--return-window", "0"], "--return-window"),
     (["--lr", "0"], "--lr"),
     (["--frame-stack", "0"], "--frame-stack"),

@@ -58,7 +58,9 @@ def test_three_room_preset_starts_at_the_easiest_boulder_phase_and_its_envs_know
     assert (cfg.task, cfg.boulder_phases, cfg.curriculum) == ("three-room", True, "adaptive")
     assert (cfg.curriculum_review, cfg.curriculum_review_unit) == (0.5, "steps")
     assert (cfg.unstick, cfg.eval_unstick, cfg.unstick_cycle) == (True, True, 2)
-    assert parse_args(["--preset", "cpu"]).unstick_cycle == 1   # two-room's results keep theirs
+    assert (cfg.held_on_top, cfg.eval_held) == (True, True)
+    cpu = parse_args(["--preset", "cpu"])                       # two-room's results keep theirs
+    assert (cpu.unstick_cycle, cpu.held_on_top, cpu.eval_held) == (1, False, False)
     assert Curriculum(cfg).phase == 22
     assert actor_specs(cfg)[0].env_kwargs["boulder_phases"] is True
     assert eval_env_kwargs(cfg)["boulder_phases"] is True    # harmless: it plays phase 1
@@ -412,6 +414,15 @@ def test_room_colours_reach_the_training_and_the_evaluation_envs():
     plain = parse_args(["--preset", "cpu-three-room", "--no-room-colours"])
     assert "room_colours" not in actor_specs(plain)[0].env_kwargs
     assert "room_colours" not in actor_specs(parse_args(["--preset", "cpu"]))[0].env_kwargs
+
+
+def test_held_on_top_reaches_the_training_and_the_evaluation_envs():
+    cfg = parse_args(["--preset", "cpu-three-room"])        # the preset draws it on top
+    assert actor_specs(cfg)[0].env_kwargs["held_on_top"] is True
+    assert eval_env_kwargs(cfg)["held_on_top"] is True      # scored through the same eyes
+    plain = parse_args(["--preset", "cpu-three-room", "--no-held-on-top"])
+    assert "held_on_top" not in actor_specs(plain)[0].env_kwargs
+    assert "held_on_top" not in actor_specs(parse_args(["--preset", "cpu"]))[0].env_kwargs
 
 
 def test_camera_pitch_reaches_the_training_and_the_evaluation_envs():

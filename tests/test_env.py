@@ -318,6 +318,35 @@ def test_a_held_boulder_leaves_the_kit_ahead_in_view(envs):
     assert held[h - 3:, w // 3: 2 * w // 3].any(), "the boulder is still drawn in hand"
 
 
+@pytest.mark.parametrize("on_top", [False, True])
+def test_a_boulder_held_before_another_shows_only_when_drawn_on_top(envs, on_top):
+    """Holding a boulder and facing another within reach: drawn where it is held, the carried
+    boulder lies behind the faced one and the view is the one of an empty hand, pixel for pixel
+    (action 4 would swap two boulders there, not clear the doorway); drawn on top it shows."""
+    env = get(envs, dict(task="three-room", boulder_phases=True, phase=8, camera_pitch=15.0,
+                         held_on_top=on_top))
+    env.reset(seed=0)
+    held = env.carrying
+    other = next(e for e in env.entities if e.kind == BOULDER and e is not held)
+    env.place_agent_facing(1, other)
+    holding, *_ = env.step(NOOP)
+    for _ in range(HEADINGS // 2):
+        env.step(LEFT)
+    _, _, _, _, info = env.step(INTERACT)          # put down behind, out of view
+    assert not info["carrying"]
+    for _ in range(HEADINGS // 2):
+        env.step(RIGHT)
+    empty, *_ = env.step(NOOP)
+    assert env.facing() is other
+    differ = (holding != empty).any(axis=0)
+    h, w = differ.shape
+    if on_top:
+        assert differ[h - 8:, w // 3: 2 * w // 3].sum() >= 30, "the held boulder is not drawn"
+        assert not differ[: h - 8].any(), "only the bottom rows show the held item"
+    else:
+        assert not differ.any()
+
+
 def test_a_pitched_camera_shows_an_item_in_reach(envs):
     """Level (MiniWorld's camera) a kit within action 4's reach lies below the view; pitched 15
     degrees down it shows at every reachable distance, and the world is unchanged."""

@@ -55,10 +55,12 @@ def test_evaluate_writes_eval_json_and_is_reproducible(run_dir, tmp_path):
     assert {k: same[k] for k in FIELDS} == {k: scores[k] for k in FIELDS}   # same seeds, same play
     assert (tmp_path / "e.gif").stat().st_size > 0
     assert scores["unstick"] is False
+    assert scores["held"] is False
     unstuck = evaluate(str(run_dir), "--episodes", "1", "--max-steps", "25", "--unstick",
-                       "--out", str(tmp_path / "unstuck.json"))
+                       "--held", "--out", str(tmp_path / "unstuck.json"))
     assert unstuck.returncode == 0, unstuck.stderr
-    assert json.loads((tmp_path / "unstuck.json").read_text())["unstick"] is True
+    unstuck_scores = json.loads((tmp_path / "unstuck.json").read_text())
+    assert unstuck_scores["unstick"] is True and unstuck_scores["held"] is True
 
 
 def test_load_agent_plays_an_episode_like_the_readme(run_dir):
@@ -86,6 +88,15 @@ def test_an_unsticking_agent_keeps_the_runs_cycle(run_dir):
     """The run was configured with --unstick-cycle 2: its agent counts the same loops as stuck."""
     assert dqn_mine.load_agent(run_dir, unstick=True).core.recent.shape[1] == 2
     assert dqn_mine.load_agent(run_dir).core.recent.shape[1] == 0   # not unsticking: no frames
+
+
+def test_a_holding_agent_holds_for_the_runs_durations(run_dir):
+    """held=True: random actions held as the run's ez training actors hold them."""
+    config = json.loads((run_dir / "config.json").read_text())
+    explorer = dqn_mine.load_agent(run_dir, epsilon=0.5, held=True).core.explorer
+    assert explorer.durations
+    assert (explorer.mu, explorer.max_duration) == (config["ez_mu"], config["ez_max_duration"])
+    assert not dqn_mine.load_agent(run_dir).core.explorer.durations
 
 
 def test_outcomes_say_what_the_agent_held_at_the_end():

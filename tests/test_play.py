@@ -156,27 +156,19 @@ def test_checkpoint_with_missing_parts_is_one_line(tmp_path, content):
     assert not (tmp_path / "x.gif").exists()
 
 
-@pytest.mark.parametrize("flag,pitch", [([], 0.0), (["--camera-pitch", "12.5"], 12.5)])
-def test_camera_pitch_flag_builds_the_pitched_env(flag, pitch):
-    from dqn_mine.play import build_parser, fill_env_settings, make_env
-
-    args = build_parser().parse_args(["--policy", "random", *flag])
-    fill_env_settings(args)
-    env = make_env(args)
-    try:
-        assert env.camera_pitch == pitch
-    finally:
-        env.close()
-
-
-@pytest.mark.parametrize("flag,coloured", [([], False), (["--room-colours"], True)])
-def test_room_colours_flag_builds_the_coloured_env(flag, coloured):
+@pytest.mark.parametrize("flag,name,value", [
+    ([], "camera_pitch", 0.0), (["--camera-pitch", "12.5"], "camera_pitch", 12.5),
+    ([], "held_on_top", False), (["--held-on-top"], "held_on_top", True),
+    ([], "room_colours", False), (["--room-colours"], "room_colours", True),
+])
+def test_look_flags_build_the_env(flag, name, value):
+    """Each flag of how the mine looks reaches the env play builds (else the default look)."""
     from dqn_mine.play import build_parser, fill_env_settings, make_env
 
     args = build_parser().parse_args(["--policy", "random", "--task", "three-room", *flag])
     fill_env_settings(args)
     env = make_env(args)
     try:
-        assert env.room_colours is coloured
+        assert getattr(env, name) == value and type(getattr(env, name)) is type(value)
     finally:
         env.close()

@@ -24,19 +24,24 @@ class AgentPolicy:
 
     def __init__(self, net: DuelingQNetwork, frame_stack: int, history_len: int,
                  epsilon: float = 0.0, seed: int = 0, unstick: bool = False,
-                 unstick_cycle: int = 1):
+                 unstick_cycle: int = 1, held: tuple[float, int] | None = None):
+        """``held``: (mu, max_duration) to hold random actions as ez-greedy training actors do
+        (None: every random action lasts one step)."""
         self.net = net.eval()
         self.frame_stack, self.history_len = frame_stack, history_len
         self.epsilon = epsilon
         self.rng = np.random.default_rng(seed)
-        explorer = Explorer(epsilon, 1, self.rng, unstick=unstick)
+        mu, longest = held or (2.0, 1)
+        explorer = Explorer(epsilon, 1, self.rng, durations=held is not None, mu=mu,
+                            max_duration=longest, unstick=unstick)
         self.core = ActingCore(self.net, explorer, 1, frame_stack, history_len, unstick_cycle)
         self.last_action: int | None = None   # None: the next observation starts an episode
 
     @classmethod
     def from_checkpoint(cls, path, epsilon: float = 0.0, seed: int = 0,
-                        unstick: bool = False) -> AgentPolicy:
-        """Raises CheckpointError (one line) for a missing or corrupt checkpoint."""
+                        unstick: bool = False, held: bool = False) -> AgentPolicy:
+        """``held``: random actions held with the run's ``--ez-mu`` and ``--ez-max-duration``.
+        Raises CheckpointError (one line) for a missing or corrupt checkpoint."""
         from dqn_mine import checkpoint as ckpt
         from dqn_mine.config import network_shape
 
@@ -49,8 +54,11 @@ class AgentPolicy:
             raise ckpt.CheckpointError(f"{path}: the network weights do not fit "
                                        f"({str(exc).splitlines()[0]})") from None
         # unstick as the run's actors did: the same loop length counts as stuck
-        cycle = state["config"].get("unstick_cycle", 1)
-        return cls(net, shape["frame_stack"], shape["history_len"], epsilon, seed, unstick, cycle)
+        config = state["config"]
+        cycle = config.get("unstick_cycle", 1)
+        durations = (config.get("ez_mu", 2.0), config.get("ez_max_duration", 100)) if held else None
+        return cls(net, shape["frame_stack"], shape["history_len"], epsilon, seed, unstick, cycle,
+                   durations)
 
     def reset(self) -> None:
         self.last_action = None

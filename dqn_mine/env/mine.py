@@ -60,6 +60,12 @@ NEAR_STEPS = 1.1
 # hidden only within about 3 units, where it leaves the view anyway (the floor's nearest
 # visible point is 2.6 units ahead).
 HELD_TOP_ANGLE = 25.0
+# The carried item is held 1.4-1.9 units ahead and passes through what it meets (only the agent
+# collides), so anything nearer (a wall, the boulder of a doorway in reach) hides it: holding a
+# boulder and facing another within reach, the view is the same pixel for pixel as empty-handed,
+# and only the one-value carrying flag tells the state where action 4 swaps two boulders (the
+# doorway stays blocked) from the one where it clears the doorway. MiniWorld avoids this by
+# making the carried entity collide. ``held_on_top`` draws the item over the world instead.
 DROP_GAP = 0.1                     # space between the agent and an item it puts down
 DOOR_CLEARANCE = 2.5               # kit, miner and agent start at least this far from doorways
 ASIDE_CLEARANCE = 3.5              # boulders moved aside lie at least this far from doorways
@@ -92,7 +98,8 @@ class MineEnv(gym.Env):
 
     def __init__(self, max_episode_steps: int, room_size: float = 16.0,
                  render_mode: str | None = None, randomise_visuals: bool = False,
-                 room_colours: bool = False, camera_pitch: float = 0.0):
+                 room_colours: bool = False, camera_pitch: float = 0.0,
+                 held_on_top: bool = False):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         if (not isinstance(camera_pitch, numbers.Real) or isinstance(camera_pitch, bool)
@@ -105,6 +112,7 @@ class MineEnv(gym.Env):
         self.randomise_visuals = bool(randomise_visuals)
         self.room_colours = bool(room_colours)
         self.camera_pitch = float(camera_pitch)
+        self.held_on_top = bool(held_on_top)
         self.light, self.tint, self.fov_y = 1.0, np.ones(3, np.float32), FOV_Y
         self.observation_space = spaces.Box(0, 255, FRAME_SHAPE, np.uint8)
         self.action_space = spaces.Discrete(NUM_ACTIONS)
@@ -361,7 +369,8 @@ class MineEnv(gym.Env):
             from dqn_mine.env.render import Scene
 
             far = 2.0 * self.room_size * (len(self.layout.rooms) + 1)
-            self._scene = Scene(OBS_WIDTH, OBS_HEIGHT, FOV_Y, EYE_HEIGHT, far, self.camera_pitch)
+            self._scene = Scene(OBS_WIDTH, OBS_HEIGHT, FOV_Y, EYE_HEIGHT, far, self.camera_pitch,
+                                self.held_on_top)
         dynamic = (np.concatenate([e.vertices() for e in world]) if world
                    else np.zeros((0, mesh.VERTEX_FLOATS), np.float32))
         held = self._held_mesh()

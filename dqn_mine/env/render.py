@@ -29,6 +29,7 @@ uniform vec4 cam;    // eye x, eye z, cos(heading), sin(heading)
 uniform vec4 proj;   // x scale, y scale, depth A, depth B
 uniform float eye_y;
 uniform vec2 tilt;   // cos, sin of the camera's downward pitch
+uniform float on_top;   // 1 while the carried item is drawn over the world (see Scene.render)
 in vec3 in_pos;
 in vec3 in_col;
 in float in_mat;
@@ -44,6 +45,9 @@ void main() {
     float zv = tilt.y * p.y + tilt.x * zl;
     // y is negated so that glReadPixels' first row is the top of the image.
     gl_Position = vec4(xv * proj.x, -yv * proj.y, proj.z * zv + proj.w, -zv);
+    // Over the world: depth squeezed into the nearest 1% (NDC -1..-0.98), which nothing in the
+    // world reaches (a wall 0.4 units ahead lies at about +0.75); the item's own faces still sort.
+    if (on_top > 0.5) gl_Position.z = 0.01 * gl_Position.z - 0.99 * gl_Position.w;
     v_col = in_col;
     v_pos = in_pos;
     v_mat = in_mat;
@@ -105,6 +109,8 @@ class _Gl:
         self.proj = self.prog["proj"]
         self.eye_y = self.prog["eye_y"]
         self.tilt = self.prog["tilt"]
+        self.on_top = self.prog["on_top"]
+        self.on_top.value = 0.0
         self.pixels = np.empty((height, width, 3), np.uint8)
         self.ctx.enable(self.ctx.DEPTH_TEST)
         self.fbo.use()
@@ -129,8 +135,9 @@ class Scene:
     """One environment's vertex buffer, drawn from the agent's eye into a (3, H, W) image."""
 
     def __init__(self, width: int, height: int, fov_y: float, eye_height: float, far: float,
-                 pitch: float = 0.0):
+                 pitch: float = 0.0, held_on_top: bool = False):
         self.g = gl(width, height)
+        self.held_on_top = held_on_top
         self.aspect, self.far = height / width, far
         self.fov_y = None
         self.set_fov(fov_y)
@@ -174,7 +181,8 @@ class Scene:
 
         ``held`` is the carried item in the camera's own frame (eye at x = z = 0 looking along +x),
         drawn after the world from that fixed frame: it stays in front of the agent without a
-        buffer upload per step, and the shared depth buffer still lets a near wall hide it.
+        buffer upload per step. The shared depth buffer lets a near wall or a faced item hide it,
+        unless the scene draws it on top (``held_on_top``).
         """
         offset = self.static_n * VERTEX_FLOATS * 4
         held = held if held is not None else dynamic[:0]
@@ -198,7 +206,10 @@ class Scene:
         self.vao.render(vertices=self.count)
         if self.held_n:
             g.cam.value = (0.0, 0.0, 1.0, 0.0)
+            if self.held_on_top:
+                g.on_top.value = 1.0
             self.vao.render(vertices=self.held_n, first=self.count)
+            g.on_top.value = 0.0
         g.fbo.read_into(g.pixels, components=3)
         return g.pixels.transpose(2, 0, 1).copy()
 

@@ -277,6 +277,8 @@ class MineRescueEnv(MineEnv):
             otherwise alike, and the view through a doorway then shows which room lies beyond).
         camera_pitch: degrees the camera looks down, 0..30 (0: level, MiniWorld's camera; at 15
             an item within action 4's reach stays at least partly in view).
+        held_on_top: the carried item drawn over the world, so that a near wall or a faced
+            item no longer hides it (see ``HELD_TOP_ANGLE`` in ``dqn_mine/env/mine.py``).
     """
 
     def __init__(self, task: str = "two-room", num_rooms: int | None = None,
@@ -284,7 +286,7 @@ class MineRescueEnv(MineEnv):
                  placement: str = "fixed", phase: int | None = None,
                  render_mode: str | None = None, randomise_visuals: bool = False,
                  boulder_phases: bool = False, room_colours: bool = False,
-                 camera_pitch: float = 0.0):
+                 camera_pitch: float = 0.0, held_on_top: bool = False):
         if task not in TASKS:
             raise ValueError(f"unknown task {task!r}; choose one of {', '.join(TASKS)}")
         spec = TASKS[task]
@@ -309,7 +311,7 @@ class MineRescueEnv(MineEnv):
         self.boulder_phases = bool(boulder_phases)
         self.phase = _check_phase(task, placement, phase, self.boulder_phases)
         super().__init__(max_episode_steps, room_size, render_mode, randomise_visuals,
-                         room_colours, camera_pitch)
+                         room_colours, camera_pitch, held_on_top)
 
     def _generate(self) -> None:
         TASKS[self.task].generate(self)

@@ -36,10 +36,10 @@ class ActorBase:
         self.parent_pid = parent_pid
         self.next_parent_check = 0.0
         self.rng = np.random.default_rng(spec.seed)
-        # Held actions are for training only: the evaluation actor measures the near-greedy
-        # policy with plain epsilon, unstuck only when asked (--eval-unstick).
+        # Held actions are for training, and for the evaluation actor only with --eval-held: it
+        # measures the near-greedy policy with plain epsilon, unstuck when asked (--eval-unstick).
         explorer = Explorer(spec.epsilon, spec.num_envs, self.rng,
-                            durations=cfg.exploration == "ez" and training,
+                            durations=cfg.exploration == "ez" and (training or cfg.eval_held),
                             mu=cfg.ez_mu, max_duration=cfg.ez_max_duration,
                             unstick=cfg.unstick if training else cfg.eval_unstick)
         # Pulled float32 weights are converted on load (WeightBroadcast copies into the tensors).

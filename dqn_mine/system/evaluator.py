@@ -17,7 +17,8 @@ from dqn_mine.system.specs import ActorSpec
 
 
 class EvalActor(ActorBase):
-    """Plain epsilon, never held actions, unstuck only with --eval-unstick; writes no replay."""
+    """Plain epsilon, unstuck only with --eval-unstick, random actions held only with
+    --eval-held; writes no replay."""
 
     def __init__(self, cfg: Config, spec: ActorSpec, control, weights,
                  parent_pid: int | None = None):

@@ -41,6 +41,8 @@ def env_kwargs(cfg: Config, **override) -> dict:
         kwargs["room_colours"] = True
     if cfg.camera_pitch:
         kwargs["camera_pitch"] = cfg.camera_pitch
+    if cfg.held_on_top:
+        kwargs["held_on_top"] = True
     if cfg.boulder_phases and kwargs["task"] == "three-room":   # not for another eval task
         kwargs["boulder_phases"] = True
     if kwargs["task"] == "rooms":  # the other tasks have a fixed room count
