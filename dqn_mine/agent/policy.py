@@ -31,9 +31,8 @@ class AgentPolicy:
         self.frame_stack, self.history_len = frame_stack, history_len
         self.epsilon = epsilon
         self.rng = np.random.default_rng(seed)
-        mu, longest = held or (2.0, 1)
-        explorer = Explorer(epsilon, 1, self.rng, durations=held is not None, mu=mu,
-                            max_duration=longest, unstick=unstick)
+        ez = dict(durations=True, mu=held[0], max_duration=held[1]) if held else {}
+        explorer = Explorer(epsilon, 1, self.rng, unstick=unstick, **ez)
         self.core = ActingCore(self.net, explorer, 1, frame_stack, history_len, unstick_cycle)
         self.last_action: int | None = None   # None: the next observation starts an episode
 
@@ -43,7 +42,7 @@ class AgentPolicy:
         """``held``: random actions held with the run's ``--ez-mu`` and ``--ez-max-duration``.
         Raises CheckpointError (one line) for a missing or corrupt checkpoint."""
         from dqn_mine import checkpoint as ckpt
-        from dqn_mine.config import network_shape
+        from dqn_mine.config import Config, network_shape
 
         state = ckpt.load(path)
         shape = network_shape(state["config"])
@@ -54,9 +53,9 @@ class AgentPolicy:
             raise ckpt.CheckpointError(f"{path}: the network weights do not fit "
                                        f"({str(exc).splitlines()[0]})") from None
         # unstick as the run's actors did: the same loop length counts as stuck
-        config = state["config"]
-        cycle = config.get("unstick_cycle", 1)
-        durations = (config.get("ez_mu", 2.0), config.get("ez_max_duration", 100)) if held else None
+        config = {**vars(Config()), **state["config"]}   # an older run lacks newer fields
+        cycle = config["unstick_cycle"]
+        durations = (config["ez_mu"], config["ez_max_duration"]) if held else None
         return cls(net, shape["frame_stack"], shape["history_len"], epsilon, seed, unstick, cycle,
                    durations)
 

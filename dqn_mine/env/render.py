@@ -209,7 +209,8 @@ class Scene:
             if self.held_on_top:
                 g.on_top.value = 1.0
             self.vao.render(vertices=self.held_n, first=self.count)
-            g.on_top.value = 0.0
+            if self.held_on_top:   # the program is shared: the next scene draws the world
+                g.on_top.value = 0.0
         g.fbo.read_into(g.pixels, components=3)
         return g.pixels.transpose(2, 0, 1).copy()
 
