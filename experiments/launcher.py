@@ -45,8 +45,7 @@ def run_state(spec: RunSpec) -> str:
     """``complete`` | ``resume`` | ``restart`` | ``fresh`` | ``conflict: <why>`` for a run."""
     d = spec.run_dir
     summary = _read_json(d / "summary.json")
-    if summary and summary.get("exit_code") == 0 \
-            and summary.get("updates", -1) >= spec.cfg.updates:
+    if summary and summary.get("exit_code") == 0 and _budget_spent(summary, spec.cfg):
         return "complete" if not _differs(spec) else f"conflict: {_differs(spec)}"
     if not (d / "config.json").exists():
         return "fresh"
@@ -54,6 +53,13 @@ def run_state(spec: RunSpec) -> str:
     if why:
         return f"conflict: {why}"
     return "resume" if (d / "checkpoint.pt").exists() else "restart"
+
+
+def _budget_spent(summary: dict, cfg: Config) -> bool:
+    """Whether a finished run used its update budget or, bounded by minutes, its time."""
+    if summary.get("updates", -1) >= cfg.updates:
+        return True
+    return cfg.minutes is not None and summary.get("wall_time", 0.0) >= 60 * cfg.minutes
 
 
 def _read_json(path: Path) -> dict | None:

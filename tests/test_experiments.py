@@ -148,6 +148,17 @@ def test_run_states_decide_skip_resume_restart(tmp_path):
     assert sweep_exit_code(outcomes, interrupted=True) == 130
 
 
+def test_a_run_that_spent_its_minutes_is_complete(tmp_path):
+    # The cpu scale of the exploration grid bounds runs by minutes, not updates: a finished run
+    # is skipped, not resumed, by the next sweep; one stopped early is resumed.
+    spec, early = load_grid("exploration").expand("cpu", tmp_path, seeds=[9])[1:3]
+    assert spec.cfg.minutes == 90 and early.cfg.minutes is not None
+    _fake_run(spec, {"exit_code": 0, "updates": 400_000, "wall_time": 90 * 60.0},
+              checkpoint=True)
+    _fake_run(early, {"exit_code": 0, "updates": 400_000, "wall_time": 60.0}, checkpoint=True)
+    assert [run_state(spec), run_state(early)] == ["complete", "resume"]
+
+
 def test_jobs_never_oversubscribe_cores(tmp_path):
     from experiments.launcher import Sweep, _Running
 
