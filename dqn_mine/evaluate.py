@@ -54,7 +54,7 @@ VIDEO_OF = ("first", "delivered")
 
 # How an episode ended, for eval.json's "outcomes": what failed, not only that it did.
 OUTCOMES = ("delivered", "holding the kit", "holding a boulder", "kit dropped",
-            "kit never taken", "kit's room never entered")
+            "kit never taken", "kit's room never entered", "start room never left")
 
 
 def play_episode(env, agent, seed: int, frames: list | None = None) -> tuple[float, int, str]:
@@ -64,7 +64,8 @@ def play_episode(env, agent, seed: int, frames: list | None = None) -> tuple[flo
     agent.reset()
     mine, kit_room = env.unwrapped, info["kit_room"]
     total, steps, had_kit = 0.0, 0, info["carrying_kit"]
-    entered = info["agent_room"] == kit_room
+    start_room = info["agent_room"]
+    entered, left = start_room == kit_room, False
     while True:
         if frames is not None:
             frames.append(env.render())
@@ -73,23 +74,29 @@ def play_episode(env, agent, seed: int, frames: list | None = None) -> tuple[flo
         steps += 1
         had_kit = had_kit or info["carrying_kit"]
         entered = entered or mine.agent_room == kit_room
+        left = left or mine.agent_room != start_room
         if terminated or truncated:
             if frames is not None:
                 frames.append(env.render())
-            return total, steps, _outcome(mine, terminated, had_kit, entered)
+            return total, steps, _outcome(mine, terminated, had_kit, entered, left)
 
 
-def _outcome(env, terminated: bool, had_kit: bool, entered_kit_room: bool = True) -> str:
+def _outcome(env, terminated: bool, had_kit: bool, entered_kit_room: bool = True,
+             left_start_room: bool = True) -> str:
     """``entered_kit_room``: the agent was in the kit's starting room at some step (in
     three-room, an agent that never took the kit mostly went the wrong way, into the miner's
-    room, rather than missing a kit it saw)."""
+    room, rather than missing a kit it saw); ``left_start_room``: it was ever outside the room
+    it started in (an agent lost in its first room is a failure of its own, apart from one
+    that went the wrong way)."""
     if terminated:
         return "delivered"
     if env.carrying is not None:
         return "holding the kit" if env.carrying.kind == KIT else "holding a boulder"
     if had_kit:
         return "kit dropped"
-    return "kit never taken" if entered_kit_room else "kit's room never entered"
+    if entered_kit_room:
+        return "kit never taken"
+    return "kit's room never entered" if left_start_room else "start room never left"
 
 
 def evaluate(env, agent, episodes: int, seed: int, progress: bool = True,

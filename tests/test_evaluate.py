@@ -109,6 +109,7 @@ def test_outcomes_say_what_the_agent_held_at_the_end():
     assert _outcome(env, False, False) == "kit never taken"
     assert _outcome(env, False, True) == "kit dropped"
     assert _outcome(env, False, False, entered_kit_room=False) == "kit's room never entered"
+    assert _outcome(env, False, False, False, left_start_room=False) == "start room never left"
     env.carrying = boulder
     assert _outcome(env, False, True) == "holding a boulder"
     env.carrying = env.kit
@@ -182,10 +183,11 @@ def test_video_stride_keeps_every_nth_frame_and_the_last(count, n, kept):
     assert every_nth(list(range(count)), n) == kept
 
 
-def test_an_agent_that_never_leaves_its_room_never_entered_the_kits_room():
+def test_an_agent_that_never_leaves_its_room_is_told_apart():
     env = MineRescueEnv(task="two-room", max_episode_steps=400)     # the kit in room 1
     turner = _ExpertEverySecondEpisode(env)             # episode 1 only turns, 2 is the expert
     scores, _ = evaluate_episodes(env, turner, 2, seed=4, progress=False)
     env.close()
-    assert scores["outcomes"]["kit's room never entered"] == 1
+    assert scores["outcomes"]["start room never left"] == 1
+    assert scores["outcomes"]["kit's room never entered"] == 0
     assert scores["outcomes"]["delivered"] == 1
