@@ -106,10 +106,11 @@ class Config:
                               "episodes that start as the full task with --placement any-room's "
                               "random rooms instead of in a phase (they do not count towards "
                               "the phase's switch)")
-    boulder_phases: bool = _f(False, "three-room curriculum: 22 phases, starts near each "
+    boulder_phases: bool = _f(False, "three-room curriculum: 23 phases, starts near each "
                               "blocked doorway, facing its boulder, holding it (anywhere in its "
                               "room, near the doorway, and in the next room), with it cleared, "
-                              "and near it cleared inserted before each phase that must "
+                              "and near it cleared (from room 0 also with the doorway beyond "
+                              "cleared) inserted before each phase that must "
                               "clear it, and near and facing the kit before the first that must "
                               "take it (two-room's phases have some)")
     rooms_schedule: tuple[int, ...] = _f((3, 4, 5), "room counts of the schedule curriculum, each "
@@ -152,7 +153,7 @@ class Config:
                                             "while the phase is at or above "
                                             "--target-update-early-phase (none = "
                                             "--target-update-interval throughout)")
-    target_update_early_phase: int = _f(16, "the hardest phase that syncs every "
+    target_update_early_phase: int = _f(17, "the hardest phase that syncs every "
                                         "--target-update-early; phases below it sync every "
                                         "--target-update-interval")
     max_grad_norm: Optional[float] = _f(40.0, "clip the global gradient norm (none or 0 = off; "
@@ -340,7 +341,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     },
 }
 # The full three-room task (2,000 steps) on a few-core CPU machine: the cpu preset's settings,
-# with the adaptive curriculum over the twenty-two boulder phases (the study's six phases leave
+# with the adaptive curriculum over the twenty-three boulder phases (the study's six phases leave
 # steps where a doorway must be cleared without ever having walked up to a blocked one or
 # through a cleared one, which on two-room was the wall until such phases existed, and one where
 # the kit must be taken after only ever starting with it in hand; see dqn_mine/env/tasks.py), half

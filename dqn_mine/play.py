@@ -150,7 +150,7 @@ def add_episode_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--phase", type=int, default=None,
                     help="curriculum phase: 1..6 of three-room and of two-room")
     ap.add_argument("--boulder-phases", action="store_true",
-                    help="three-room: --phase counts the twenty-two boulder phases (as train's)")
+                    help="three-room: --phase counts the twenty-three boulder phases (as train's)")
     ap.add_argument("--visual-randomisation", action="store_true",
                     help="random light, wall colour and field of view")
     ap.add_argument("--room-colours", action=argparse.BooleanOptionalAction, default=None,

@@ -73,7 +73,7 @@ def test_putting_a_held_boulder_down_and_up_again_is_a_two_step_loop():
     """In the real mine, action 4 pressed again and again while holding a boulder puts it down
     and takes it up: the frames alternate, which a cycle of 2 catches and a cycle of 1 misses.
     So does a left turn undone by a right one."""
-    env = MineRescueEnv(task="three-room", phase=8, boulder_phases=True)
+    env = MineRescueEnv(task="three-room", phase=9, boulder_phases=True)
     obs, info = env.reset(seed=3)
     assert info["carrying"]
     cores = {k: core_of(num_envs=1, frame_stack=1, unstick=True, cycle=k) for k in (1, 2)}

@@ -61,7 +61,7 @@ def test_three_room_preset_starts_at_the_easiest_boulder_phase_and_its_envs_know
     assert (cfg.held_on_top, cfg.eval_held) == (True, True)
     cpu = parse_args(["--preset", "cpu"])                       # two-room's results keep theirs
     assert (cpu.unstick_cycle, cpu.held_on_top, cpu.eval_held) == (1, False, False)
-    assert Curriculum(cfg).phase == 22
+    assert Curriculum(cfg).phase == 23
     assert actor_specs(cfg)[0].env_kwargs["boulder_phases"] is True
     assert eval_env_kwargs(cfg)["boulder_phases"] is True    # harmless: it plays phase 1
     other = parse_args(["--preset", "cpu-three-room", "--eval-task", "two-room"])
@@ -324,11 +324,11 @@ def test_curriculum_dr_starts_a_share_of_episodes_as_the_randomised_full_task():
     cfg = parse_args(["--preset", "cpu-three-room", "--curriculum-dr", "0.3",
                       "--curriculum-review-unit", "episodes", "--curriculum-review", "0"])
     cur, rng = Curriculum(cfg), np.random.default_rng(0)
-    starts = [cur.episode_start(17, 0, rng) for _ in range(4_000)]
+    starts = [cur.episode_start(18, 0, rng) for _ in range(4_000)]
     dr = [settings for phase, settings in starts if phase == DR_PHASE]
     assert abs(len(dr) / len(starts) - 0.3) < 0.025
     assert all(s == {"phase": None, "placement": "any-room"} for s in dr)
-    assert all(s == {"phase": 17, "placement": "fixed"} for p, s in starts if p != DR_PHASE)
+    assert all(s == {"phase": 18, "placement": "fixed"} for p, s in starts if p != DR_PHASE)
     cur.played(DR_PHASE, 2_000)     # outside the review count
     assert cur.played_steps == 0
     # an actor's env built for the fixed task takes both kinds of start, episode by episode
@@ -342,7 +342,7 @@ def test_curriculum_dr_starts_a_share_of_episodes_as_the_randomised_full_task():
             rooms.add((info["agent_room"], info["kit_room"], info["miner_room"]))
             assert not info["carrying"]
         else:
-            assert info["agent_room"] == 2 and info["miner_room"] == 0   # phase 17: room 2
+            assert info["agent_room"] == 2 and info["miner_room"] == 0   # phase 18: room 2
     env.close()
     assert len(rooms) >= 4 and rooms != {(0, 2, 0)}
 

@@ -323,7 +323,7 @@ def test_a_boulder_held_before_another_shows_only_when_drawn_on_top(envs, on_top
     """Holding a boulder and facing another within reach: drawn where it is held, the carried
     boulder lies behind the faced one and the view is the one of an empty hand, pixel for pixel
     (action 4 would swap two boulders there, not clear the doorway); drawn on top it shows."""
-    env = get(envs, dict(task="three-room", boulder_phases=True, phase=8, camera_pitch=15.0,
+    env = get(envs, dict(task="three-room", boulder_phases=True, phase=9, camera_pitch=15.0,
                          held_on_top=on_top))
     env.reset(seed=0)
     held = env.carrying
@@ -537,7 +537,7 @@ def test_truncation_at_the_step_limit():
     (dict(task="one-room", phase=2), "three-room"),
     (dict(task="two-room", phase=7), "phase"),
     (dict(task="three-room", phase=2, placement="any-room"), "fixed"),
-    (dict(task="three-room", phase=23, boulder_phases=True), "phase"),
+    (dict(task="three-room", phase=24, boulder_phases=True), "phase"),
     (dict(task="two-room", boulder_phases=True), "boulder_phases"),
     (dict(render_mode="human"), "render_mode"),
     (dict(camera_pitch=-5.0), "camera_pitch"),

@@ -101,8 +101,9 @@ def test_phase_starts_as_specified(task, boulder, phase, kit_room, miner_room):
             assert env.facing() is env.kit
             obs = env.step(5)[0].astype(int)      # no-op: the start's frame
             assert ((obs[0] > 150) & (obs[1] < 60) & (obs[2] < 60)).sum() >= 10
-        if want.near_doorway:   # a few steps from the doorway cleared last
-            door = env.layout.doors[cleared - 1]
+        if want.near_doorway:   # a few steps from the (cleared) doorway on from its room
+            door = env.layout.doors[want.agent_room]
+            assert open_doorways(env)[want.agent_room]
             assert 2.0 <= math.dist((env.agent_x, env.agent_z), door.center) <= 4.0
         if want.near_kit:
             assert 2.0 <= math.dist((env.agent_x, env.agent_z), (env.kit.x, env.kit.z)) <= 4.0
