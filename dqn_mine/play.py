@@ -77,6 +77,7 @@ def make_env(args: argparse.Namespace):
     TimeLimit wrapper and never passes it on, so the task's default limit would still cut a longer
     --max-steps short."""
     from dqn_mine.env import MineRescueEnv
+    from dqn_mine.system.specs import optional_env_kwargs
 
     kwargs = dict(task=args.task, placement=args.placement, room_size=args.room_size,
                   render_mode="rgb_array", randomise_visuals=args.visual_randomisation)
@@ -84,14 +85,8 @@ def make_env(args: argparse.Namespace):
         kwargs["num_rooms"] = args.num_rooms
     if args.phase is not None:
         kwargs["phase"] = args.phase
-    if args.boulder_phases:
-        kwargs["boulder_phases"] = True
-    if args.room_colours:
-        kwargs["room_colours"] = True
-    if args.camera_pitch:
-        kwargs["camera_pitch"] = args.camera_pitch
-    if args.held_on_top:
-        kwargs["held_on_top"] = True
+    kwargs.update(optional_env_kwargs(args.room_colours, args.camera_pitch, args.held_on_top,
+                                      args.boulder_phases))
     if args.max_steps is not None:
         kwargs["max_episode_steps"] = args.max_steps
     return MineRescueEnv(**kwargs)

@@ -14,7 +14,7 @@ import pytest
 from dqn_mine.config import parse_args
 from dqn_mine.env.tasks import THREE_ROOM_BOULDER_PHASES
 from dqn_mine.system.curriculum import Curriculum
-from dqn_mine.system.specs import actor_specs, eval_env_kwargs
+from dqn_mine.system.specs import actor_specs, eval_env_kwargs, optional_env_kwargs
 
 ROOT = Path(__file__).resolve().parents[1]
 FAST = ["--actors", "2", "--prefill", "100", "--replay-capacity", "4096", "--log-interval", "10",
@@ -66,6 +66,18 @@ def test_three_room_preset_starts_at_the_easiest_boulder_phase_and_its_envs_know
     assert eval_env_kwargs(cfg)["boulder_phases"] is True    # harmless: it plays phase 1
     other = parse_args(["--preset", "cpu-three-room", "--eval-task", "two-room"])
     assert "boulder_phases" not in eval_env_kwargs(other)
+
+
+def test_optional_env_settings_are_passed_only_when_on():
+    """Off, an optional setting is left out, so the env keeps its own default."""
+    optional = {"room_colours", "camera_pitch", "held_on_top", "boulder_phases"}
+    assert optional_env_kwargs(False, 0.0, False, False) == {}
+    assert optional_env_kwargs(True, 15.0, True, True) == {
+        "room_colours": True, "camera_pitch": 15.0, "held_on_top": True, "boulder_phases": True}
+    trained = actor_specs(parse_args(["--preset", "cpu-three-room"]))[0].env_kwargs
+    assert {name: trained[name] for name in optional} == optional_env_kwargs(True, 15.0, True, True)
+    plain = actor_specs(parse_args(["--preset", "cpu"]))[0].env_kwargs
+    assert not optional & set(plain)
 
 
 def test_low_epsilon_return_counts_only_the_near_greedy_episodes_of_the_phase():

@@ -37,16 +37,22 @@ def env_kwargs(cfg: Config, **override) -> dict:
                   max_episode_steps=cfg.max_episode_steps, placement=cfg.placement,
                   randomise_visuals=cfg.visual_randomisation)
     kwargs.update(override)
-    if cfg.room_colours:
-        kwargs["room_colours"] = True
-    if cfg.camera_pitch:
-        kwargs["camera_pitch"] = cfg.camera_pitch
-    if cfg.held_on_top:
-        kwargs["held_on_top"] = True
-    if cfg.boulder_phases and kwargs["task"] == "three-room":   # not for another eval task
-        kwargs["boulder_phases"] = True
+    kwargs.update(optional_env_kwargs(  # boulder phases: not for another eval task
+        cfg.room_colours, cfg.camera_pitch, cfg.held_on_top,
+        cfg.boulder_phases and kwargs["task"] == "three-room"))
     if kwargs["task"] == "rooms":  # the other tasks have a fixed room count
         kwargs.setdefault("num_rooms", cfg.num_rooms)
+    return kwargs
+
+
+def optional_env_kwargs(room_colours, camera_pitch, held_on_top, boulder_phases) -> dict:
+    """The optional look and curriculum-table settings, passed only when on so that an
+    environment built without them keeps its own defaults (trainer, evaluator and ``play``)."""
+    switches = {"room_colours": room_colours, "held_on_top": held_on_top,
+                "boulder_phases": boulder_phases}
+    kwargs = {name: True for name, on in switches.items() if on}
+    if camera_pitch:
+        kwargs["camera_pitch"] = camera_pitch
     return kwargs
 
 
