@@ -661,6 +661,17 @@ def network_shape(cfg) -> dict[str, int]:
     return {name: values[name] for name in NETWORK_SHAPE}
 
 
+def inert_settings(c: Config) -> set[str]:
+    """Settings this configuration never reads, so that a run differing only in them (e.g. one
+    made before such a default changed) is the same run: a sweep resumes and reports it."""
+    inert = set()
+    if c.target_update_early is None:
+        inert.add("target_update_early_phase")
+    if c.curriculum != "schedule":
+        inert.add("rooms_schedule")
+    return inert
+
+
 def target_update_interval(c: Config, phase: int) -> int:
     """Updates between target syncs while the adaptive curriculum is in ``phase``."""
     if c.target_update_early is not None and phase >= c.target_update_early_phase:

@@ -13,6 +13,9 @@ missing, or no ``config.json``                              start it
 saved config differs from the grid's (not just ``updates``) refuse: another ``OUT`` or delete it
 ==========================================================  ==================================
 
+Settings the configuration never reads (``dqn_mine.config.inert_settings``) do not count as a
+difference, so a default changed since the run was made does not strand it.
+
 Ctrl-C (or SIGTERM) is forwarded once to every running trainer, which stops cleanly and leaves a
 checkpoint; the launcher waits for them, starts nothing new and exits 130. Trainers run in their
 own process group so a terminal's Ctrl-C reaches them only through the launcher.
@@ -32,7 +35,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from dqn_mine.config import Config, ConfigError
+from dqn_mine.config import Config, ConfigError, inert_settings
 from dqn_mine.exitcodes import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from experiments.grid import RunSpec
 
@@ -75,7 +78,8 @@ def _differs(spec: RunSpec) -> str:
         saved = Config.from_json(spec.run_dir / "config.json")
     except ConfigError as exc:
         return str(exc)
-    names = [f.name for f in dataclasses.fields(Config) if f.name not in RESUMABLE
+    ignored = RESUMABLE | (inert_settings(saved) & inert_settings(spec.cfg))
+    names = [f.name for f in dataclasses.fields(Config) if f.name not in ignored
              and getattr(saved, f.name) != getattr(spec.cfg, f.name)]
     if not names:
         return ""

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dqn_mine.config import ConfigError, parse_args
+from dqn_mine.config import ConfigError, inert_settings, parse_args
 from dqn_mine.metrics import COLUMNS
 from experiments.aggregate import align, load_runs, summarize_config
 from experiments.grid import SCALES, Claim, Grid, grid_names, load_grid
@@ -146,6 +146,26 @@ def test_run_states_decide_skip_resume_restart(tmp_path):
     assert sweep_exit_code(outcomes + [Outcome(specs[4], states[4])], False) == 1
     assert sweep_exit_code(outcomes + [Outcome(specs[2], "resume", 1)], False) == 1
     assert sweep_exit_code(outcomes, interrupted=True) == 130
+
+
+def test_a_setting_the_run_never_reads_is_no_conflict(tmp_path):
+    # A schedule run made when --target-update-early-phase defaulted to 12 (it now is 17) never
+    # read it (no --target-update-early): still the grid's run. Were it read, a conflict.
+    import dataclasses
+
+    spec = next(s for s in load_grid("scaling").expand("cpu", tmp_path, seeds=[0])
+                if s.cfg.curriculum == "schedule")
+    done = {"exit_code": 0, "updates": spec.cfg.updates}
+    _fake_run(spec, done, cfg=dataclasses.replace(spec.cfg, target_update_early_phase=12))
+    assert run_state(spec) == "complete"
+    read = dataclasses.replace(spec, cfg=dataclasses.replace(
+        spec.cfg, target_update_early=500, run_dir=str(tmp_path / "read")))
+    _fake_run(read, done, cfg=dataclasses.replace(read.cfg, target_update_early_phase=12))
+    assert run_state(read).startswith("conflict")
+    assert "target_update_early_phase 12 != 17" in run_state(read)
+    no_schedule = dataclasses.replace(spec.cfg, curriculum="none")
+    assert "rooms_schedule" in inert_settings(no_schedule)
+    assert "rooms_schedule" not in inert_settings(spec.cfg)
 
 
 def test_a_run_that_spent_its_minutes_is_complete(tmp_path):
