@@ -48,13 +48,14 @@ def run_state(spec: RunSpec) -> str:
     """``complete`` | ``resume`` | ``restart`` | ``fresh`` | ``conflict: <why>`` for a run."""
     d = spec.run_dir
     summary = _read_json(d / "summary.json")
-    if summary and summary.get("exit_code") == 0 and _budget_spent(summary, spec.cfg):
-        return "complete" if not _differs(spec) else f"conflict: {_differs(spec)}"
-    if not (d / "config.json").exists():
+    finished = summary and summary.get("exit_code") == 0 and _budget_spent(summary, spec.cfg)
+    if not finished and not (d / "config.json").exists():
         return "fresh"
-    why = _differs(spec)
+    why = _differs(spec)  # reads and compares config.json once
     if why:
         return f"conflict: {why}"
+    if finished:
+        return "complete"
     return "resume" if (d / "checkpoint.pt").exists() else "restart"
 
 
