@@ -153,7 +153,9 @@ def main(argv=None) -> int:
     try:
         check_settings(args)
         from dqn_mine import load_agent
+        from dqn_mine.machine import single_thread_inference
 
+        single_thread_inference()
         agent = load_agent(args.checkpoint, epsilon=args.epsilon, seed=args.seed,
                            unstick=args.unstick, held=args.held)
         fill_env_settings(args)

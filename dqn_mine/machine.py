@@ -31,6 +31,19 @@ def cpu_model(cpuinfo: str = "/proc/cpuinfo") -> tuple[str, list[str]]:
     return name, [f for f in FLAGS if f in flags]
 
 
+def single_thread_inference() -> None:
+    """One torch thread for a process that plays one frame at a time (evaluate, play).
+
+    A batch-1 forward pass gains nothing from a second thread (two 2,000-step evaluation
+    episodes: 4.2 s with two threads, 4.4 s with one, on an idle 2-core VM), but the thread team
+    then waits for both cores: beside one busy process the same episodes took 52-75 s with two
+    threads and 4.4 s with one, and a niced evaluation beside a training run had not finished
+    after 20 minutes."""
+    import torch
+
+    torch.set_num_threads(1)
+
+
 def gemm_gflops(seconds: float = 0.2) -> float:
     """float32 GFLOP/s of one thread on a GEMM_SIZE^2 matrix product (about 0.2 s)."""
     import torch

@@ -37,7 +37,9 @@ def random_policy(args: argparse.Namespace) -> Policy:
 def agent_policy(args: argparse.Namespace) -> Policy:
     """A trained network from --checkpoint (a run folder or a .pt file), near-greedy."""
     from dqn_mine.agent.policy import AgentPolicy
+    from dqn_mine.machine import single_thread_inference
 
+    single_thread_inference()
     return AgentPolicy.from_checkpoint(args.checkpoint, epsilon=args.epsilon, seed=args.seed,
                                        unstick=args.unstick, held=args.held)
 

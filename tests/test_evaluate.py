@@ -191,3 +191,19 @@ def test_an_agent_that_never_leaves_its_room_is_told_apart():
     assert scores["outcomes"]["start room never left"] == 1
     assert scores["outcomes"]["kit's room never entered"] == 0
     assert scores["outcomes"]["delivered"] == 1
+
+
+def test_evaluate_plays_on_one_torch_thread(run_dir, tmp_path):
+    """A batch-1 forward pass on two threads crawls beside a training run; evaluate uses one."""
+    import torch
+
+    from dqn_mine.evaluate import main
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        code = main([str(run_dir), "--episodes", "1", "--max-steps", "5", "--quiet",
+                     "--out", str(tmp_path / "one.json")])
+        assert code == 0 and torch.get_num_threads() == 1
+    finally:
+        torch.set_num_threads(threads)
