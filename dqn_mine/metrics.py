@@ -20,6 +20,7 @@ COLUMNS = (
     # that mostly explore.
     "low_eps_return", "phase_low_eps_return",
     "target_sync",    # updates between target syncs at this row (--target-update-early moves it)
+    "rewarded_episodes",   # training episodes with a reward so far (the pre-fill's included)
 )
 LOW_EPSILON = 0.01   # the study's rate: an env at or below it plays (almost) its greedy policy
 
@@ -125,8 +126,8 @@ class RateMeter:
 def progress_postfix(row: dict[str, float]) -> dict[str, str]:
     """The few figures worth watching live in the tqdm bar."""
     keys = {"episode_return": "ret", "eval_return": "eval", "updates_per_s": "upd/s",
-            "env_steps_per_s": "steps/s", "replay_ratio": "ratio", "loss": "loss",
-            "phase": "phase"}
+            "rewarded_episodes": "rewarded", "env_steps_per_s": "steps/s",
+            "replay_ratio": "ratio", "loss": "loss", "phase": "phase"}
     out = {}
     for key, short in keys.items():
         value: float | None = row.get(key)
@@ -134,5 +135,5 @@ def progress_postfix(row: dict[str, float]) -> dict[str, str]:
             continue
         if key == "phase" and not value:  # 0 = no curriculum: nothing to watch
             continue
-        out[short] = f"{value:.3g}"
+        out[short] = str(value) if isinstance(value, int) else f"{value:.3g}"
     return out

@@ -34,6 +34,21 @@ def random_policy(args: argparse.Namespace) -> Policy:
     return lambda env, obs, info: rng.randrange(env.action_space.n)
 
 
+def bump_and_press_policy(args: argparse.Namespace) -> Policy:
+    """The scripted walker that pre-fills the replay by default (``BumpAndPress``): straight
+    ahead until the view stops changing, then action 4 and a turn away. Seeded by --seed."""
+    from dqn_mine.agent.explore import BumpAndPress
+
+    walker = BumpAndPress(1, np.random.default_rng(args.seed))
+    last: list[np.ndarray | None] = [None]   # the frame before this one
+
+    def act(env, obs, info) -> int:
+        stuck = last[0] is not None and np.array_equal(last[0], obs)
+        last[0] = obs
+        return int(walker.act(np.zeros(1, np.int64), np.array([stuck]))[0])
+    return act
+
+
 def agent_policy(args: argparse.Namespace) -> Policy:
     """A trained network from --checkpoint (a run folder or a .pt file), near-greedy."""
     from dqn_mine.agent.policy import AgentPolicy
@@ -47,6 +62,7 @@ def agent_policy(args: argparse.Namespace) -> Policy:
 POLICIES: dict[str, Callable[[argparse.Namespace], Policy]] = {
     "expert": expert_policy,
     "random": random_policy,
+    "bump-and-press": bump_and_press_policy,
     "agent": agent_policy,
 }
 

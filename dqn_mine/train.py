@@ -84,7 +84,7 @@ def open_run(cfg: Config) -> tuple[Config, Path, dict | None]:
 def report(summary) -> None:
     s = summary
     print(f"\n{PROG}: {s.reason} after {s.updates} updates, {s.env_steps} env steps, "
-          f"{s.episodes} episodes in {s.wall_time:.0f} s")
+          f"{s.episodes} episodes ({s.rewarded_episodes} rewarded) in {s.wall_time:.0f} s")
     print(f"  mean return (last {s.return_episodes} episodes of this process) "
           f"{s.episode_return:.3f} | {s.updates_per_s:.1f} upd/s while training | "
           f"{s.env_steps_per_s:.0f} steps/s | replay ratio {s.replay_ratio:.3f}")

@@ -169,6 +169,17 @@ def test_config_json_states_what_differs_from_the_preset(tmp_path):
     assert parse_args([]).preset_differences() == {}
 
 
+def test_a_run_saved_before_the_prefill_explorer_existed_resumes_with_the_agents_prefill(tmp_path):
+    c = Config()
+    assert c.prefill_explorer == "bump-and-press"       # the default now
+    data = json.loads(json.dumps(c.to_dict()))
+    del data["prefill_explorer"]                         # as older run folders wrote it
+    (tmp_path / "config.json").write_text(json.dumps(data))
+    assert Config.from_json(tmp_path / "config.json").prefill_explorer == "agent"
+    for preset in ("smoke", "cpu", "cpu-three-room"):    # measured with the agent's pre-fill
+        assert parse_args(["--preset", preset]).prefill_explorer == "agent"
+
+
 @pytest.mark.parametrize("content,fragment", [
     ("{not json", "corrupt"), ('{"actors": 3, "warp": 9}', "unknown settings warp"),
     ("[1, 2]", "json object"), ('{"actors": "7"}', "actors = '7'"),
@@ -283,3 +294,4 @@ def test_progress_bar_shows_phase_only_with_a_curriculum():
     row = {"episode_return": 0.25, "eval_return": float("nan"), "phase": 0, "loss": 1e-4}
     assert progress_postfix(row) == {"ret": "0.25", "loss": "0.0001"}
     assert progress_postfix({**row, "phase": 3})["phase"] == "3"
+    assert progress_postfix({**row, "rewarded_episodes": 12345})["rewarded"] == "12345"

@@ -17,8 +17,10 @@ from dqn_mine.system.curriculum import Curriculum
 from dqn_mine.system.specs import actor_specs, eval_env_kwargs, optional_env_kwargs
 
 ROOT = Path(__file__).resolve().parents[1]
+# The agent pre-fills: the scripted walker's episodes would not count towards the switches.
 FAST = ["--actors", "2", "--prefill", "100", "--replay-capacity", "4096", "--log-interval", "10",
-        "--no-progress", "--max-episode-steps", "30", "--room-size", "8"]
+        "--no-progress", "--max-episode-steps", "30", "--room-size", "8",
+        "--prefill-explorer", "agent"]
 
 
 def run(*args: str) -> list:
@@ -93,6 +95,22 @@ def test_low_epsilon_return_counts_only_the_near_greedy_episodes_of_the_phase():
     cur.record(6, 0.0, epsilon=0.2)
     cur.advance(updates=0)               # mean 0.5 > 0.4 over all four: the rule ignores epsilon
     assert cur.phase == 5 and math.isnan(cur.phase_low_eps_return)
+
+
+def test_the_scripted_prefill_walkers_episodes_do_not_advance_the_curriculum():
+    from dqn_mine.agent.explore import SCRIPTED_EPSILON
+
+    cfg = parse_args(["--curriculum", "adaptive", "--curriculum-window", "2",
+                      "--curriculum-threshold", "0.4"])             # two-room: starts at 6
+    cur = Curriculum(cfg)
+    for _ in range(4):
+        cur.record(6, 1.0, epsilon=SCRIPTED_EPSILON)   # the walker delivers: not the agent
+    cur.advance(updates=0)
+    assert cur.phase == 6 and math.isnan(cur.phase_return)
+    cur.record(6, 1.0, epsilon=0.01)
+    cur.record(6, 1.0, epsilon=0.01)
+    cur.advance(updates=0)
+    assert cur.phase == 5
 
 
 def test_adaptive_curriculum_stops_at_the_full_task_and_resumes_where_it_was():

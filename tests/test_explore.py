@@ -5,7 +5,13 @@ import math
 import numpy as np
 import pytest
 
-from dqn_mine.agent.explore import HELD_ACTIONS, Explorer, zeta_durations
+from dqn_mine.agent.explore import (
+    HELD_ACTIONS,
+    BumpAndPress,
+    Explorer,
+    PrefillFirst,
+    zeta_durations,
+)
 from dqn_mine.bench.explore import POLICIES, SUBGOALS, fresh_network_inputs, measure
 from dqn_mine.env import MineRescueEnv
 from dqn_mine.env.mine import AGENT_RADIUS, FORWARD_STEP, HEADINGS
@@ -201,6 +207,33 @@ def test_bump_and_press_presses_at_obstacles_and_seldom_idles():
     assert r["episodes"] == 12
     assert r["boulder moved"] >= 0.25 and r["idle steps"] < 0.3
     assert r["room entered"] <= r["boulder moved"] and r["delivered"] <= r["kit picked up"]
+
+
+def test_bump_and_press_walks_until_stuck_then_presses_and_turns_away():
+    bp = BumpAndPress(2, np.random.default_rng(0))
+    free, stuck = np.zeros(2, bool), np.array([True, False])
+    first = bp.act(np.zeros(2, np.int64), stuck)
+    assert first[0] == INTERACT                       # pressed where the view stopped changing
+    turns = [bp.act(np.zeros(2, np.int64), free)[0] for _ in range(3)]
+    assert len(set(turns)) == 1 and turns[0] in (2, 3)  # then one turn held, at least 3 steps
+    bp.reset(0)
+    assert bp.queued[0] == [] and np.isinf(bp.epsilon).all()   # never counted as near-greedy
+
+
+def test_prefill_first_hands_over_to_the_agent_after_its_steps():
+    """The scripted walker acts for exactly the actor's pre-fill steps, then the greedy agent."""
+    greedy = np.array([5, 5])                          # no-op: never the walker's straight walk
+    explorer = PrefillFirst(BumpAndPress(2, np.random.default_rng(0)),
+                            Explorer(0.0, 2, np.random.default_rng(0)), steps=6)
+    assert explorer.unstick                            # the acting core must compare frames
+    taken = []
+    for _ in range(5):                                 # 2 envs: 3 calls are 6 steps
+        taken.append(explorer.epsilon.copy())
+        actions = explorer.act(greedy, np.zeros(2, bool))
+        taken[-1] = (taken[-1], actions)
+    assert all(np.isinf(eps).all() for eps, _ in taken[:3])
+    assert all((eps == 0).all() and (a == greedy).all() for eps, a in taken[3:])
+    assert sum((a == 0).sum() for _, a in taken[:3]) >= 4   # mostly straight ahead
 
 
 # --- configuration -----------------------------------------------------------------------------

@@ -77,6 +77,31 @@ def test_random_policy_respects_step_limit(tmp_path):
     assert gif_frames(out)[0] <= 26
 
 
+def test_bump_and_press_walker_presses_action_4_where_it_is_blocked():
+    """The default pre-fill's walker, played alone: it acts only on what it sees and, in one
+    room, takes the kit up at some wall or entity it bumps into."""
+    from dqn_mine.play import POLICIES, build_parser, fill_env_settings, make_env
+
+    args = build_parser().parse_args(["--policy", "bump-and-press", "--task", "one-room",
+                                      "--seed", "3"])
+    fill_env_settings(args)
+    env = make_env(args)
+    policy = POLICIES["bump-and-press"](args)
+    obs, info = env.reset(seed=args.seed)
+    actions, carried = [], False
+    try:
+        for _ in range(1000):
+            actions.append(policy(env, obs, info))
+            obs, reward, terminated, truncated, info = env.step(actions[-1])
+            carried |= bool(info["carrying"])
+            if terminated or truncated:
+                break
+    finally:
+        env.close()
+    assert actions.count(0) > len(actions) / 2 and 4 in actions   # mostly straight ahead
+    assert carried                                                # and it took something up
+
+
 def test_max_steps_above_the_task_default_is_honoured():
     # In-process and without the GIF: writing ~1000 frames takes far longer than playing them.
     from dqn_mine.env import TASKS

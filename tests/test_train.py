@@ -339,6 +339,28 @@ def test_cpu_preset_finds_rewards_on_two_room_within_its_prefill(tmp_path):
     assert max(float(r["episode_return"]) for r in rows) > 0.05
 
 
+def test_bump_and_press_prefill_records_more_rewards_than_the_agents_own(tmp_path):
+    """With --prefill-explorer bump-and-press the scripted walker fills the replay: on the full
+    16 x 16 one-room task its pre-fill records rewarded episodes, more than the same pre-fill
+    played by the fresh agent at epsilon 0.01."""
+    common = ["--task", "one-room", "--serial", "--actors", "2", "--envs-per-actor", "8",
+              "--prefill", "8000", "--updates", "20", "--replay-capacity", "32768",
+              "--log-interval", "20", "--no-progress"]
+    rows = {}
+    for explorer in ("bump-and-press", "agent"):
+        run_dir = tmp_path / explorer
+        res = run_train(*common, "--prefill-explorer", explorer, "--run-dir", str(run_dir),
+                        timeout=600)
+        assert res.returncode == 0, res.stderr[-3000:]
+        rows[explorer] = metrics_rows(run_dir)[-1]
+    scripted, agent = rows["bump-and-press"], rows["agent"]
+    assert int(scripted["episodes"]) >= 16 and float(scripted["episode_return"]) > 0.05
+    assert int(agent["rewarded_episodes"]) < int(scripted["rewarded_episodes"])
+    summary = json.loads((tmp_path / "bump-and-press" / "summary.json").read_text())
+    assert summary["rewarded_episodes"] == int(scripted["rewarded_episodes"])
+    assert float(scripted["sampled_reward"]) > 0          # the learner trains on those rewards
+
+
 def test_tensorboard_event_files_hold_every_metrics_row(tmp_path):
     pytest.importorskip("tensorboard")
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator

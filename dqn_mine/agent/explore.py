@@ -17,16 +17,27 @@ A greedy policy can also loop over two frames: holding a boulder it puts it down
 within reach it takes it up, and so on to the step limit (a left turn undone by a right one is
 the same kind of loop). With ``unstick_cycle`` k (kept by :class:`ActingCore`, which compares
 the frames) a frame equal to any of the last k counts as stuck.
+
+:class:`BumpAndPress` is no agent's exploration but a scripted walker: the explore benchmark's
+yardstick, and with ``--prefill-explorer bump-and-press`` the policy that fills the replay before
+the learner starts (:class:`PrefillFirst`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from dqn_mine.env.interface import INTERACT, NUM_ACTIONS
+from dqn_mine.env.interface import FORWARD, INTERACT, NUM_ACTIONS, TURN_LEFT, TURN_RIGHT
 
 # Actions below INTERACT (forward, backward, the turns) are held; interact and no-op last one step.
 HELD_ACTIONS = INTERACT
+# The exploration rate an episode of the scripted walker is recorded with: above every real rate.
+SCRIPTED_EPSILON = float("inf")
+
+
+def is_scripted(epsilon: float) -> bool:
+    """Whether an episode recorded with ``epsilon`` was played by the scripted walker."""
+    return epsilon == SCRIPTED_EPSILON
 
 
 def zeta_durations(rng: np.random.Generator, size: int, mu: float, cap: int) -> np.ndarray:
@@ -79,3 +90,69 @@ class Explorer:
             moving = self.action[start] < HELD_ACTIONS
             left[moving] = zeta_durations(self.rng, int(moving.sum()), self.mu, self.max_duration)
         self.left[start] = left
+
+
+class BumpAndPress:
+    """A scripted undirected walker that ignores the network.
+
+    It walks straight ahead (a uniform random action 5% of the time) until its view stops
+    changing, then presses action 4 once and turns away, left or right at random, for 3-19
+    steps. Like the agents it sees only whether its view changed, but it does what no
+    epsilon-greedy walker does: it tries action 4 at every wall or entity it meets and leaves
+    the wall at once. Same interface as :class:`Explorer`. Its ``epsilon`` is infinite (no step
+    is the network's choice; see :func:`is_scripted`): its episodes count neither as near-greedy
+    ones nor towards the curriculum's switch, which judges the agent.
+    """
+
+    unstick = True   # it needs to know when the frame did not change
+
+    def __init__(self, num_envs: int, rng: np.random.Generator):
+        self.rng = rng
+        self.epsilon = np.full(num_envs, SCRIPTED_EPSILON)
+        self.queued: list[list[int]] = [[] for _ in range(num_envs)]   # turns still to take
+
+    def reset(self, j: int) -> None:
+        self.queued[j] = []
+
+    def act(self, greedy: np.ndarray, stuck: np.ndarray) -> np.ndarray:
+        actions = np.full(len(greedy), FORWARD, np.int64)
+        for j, queued in enumerate(self.queued):
+            if queued:
+                actions[j] = queued.pop()
+            elif stuck[j]:
+                actions[j] = INTERACT
+                turn = int(self.rng.integers(TURN_RIGHT, TURN_LEFT + 1))
+                queued.extend([turn] * int(self.rng.integers(3, 20)))
+            elif self.rng.random() < 0.05:
+                actions[j] = int(self.rng.integers(NUM_ACTIONS))
+        return actions
+
+
+class PrefillFirst:
+    """Acts with ``prefill`` for an actor's first ``steps`` environment steps (its share of the
+    replay's pre-fill), then with ``then`` for the rest of the run.
+
+    The switch happens mid-episode: the replay does not care which policy took a step (Q-learning
+    learns off-policy), and an episode that straddles it is reported with ``then``'s epsilon.
+    """
+
+    def __init__(self, prefill, then: Explorer, steps: int):
+        self.prefill, self.then, self.left = prefill, then, steps
+        self.unstick = prefill.unstick or then.unstick   # the core compares frames if either asks
+
+    @property
+    def current(self):
+        return self.prefill if self.left > 0 else self.then
+
+    @property
+    def epsilon(self) -> np.ndarray:
+        return self.current.epsilon
+
+    def reset(self, j: int) -> None:
+        self.prefill.reset(j)
+        self.then.reset(j)
+
+    def act(self, greedy: np.ndarray, stuck: np.ndarray | None = None) -> np.ndarray:
+        explorer = self.current
+        self.left -= len(greedy)
+        return explorer.act(greedy, stuck)

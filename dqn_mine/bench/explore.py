@@ -18,7 +18,8 @@ Policies:
 - ``fresh Ape-X``: the same network, episodes spread over the Ape-X epsilons of 7 actors;
 - ``fresh ez eps=0.01`` etc.: the same with temporally extended random actions;
 - ``... unstick``: the same, with a random action after every step that left the frame unchanged;
-- ``bump-and-press``: a scripted yardstick, not a learning agent's exploration (``BumpAndPress``).
+- ``bump-and-press``: a scripted walker, the yardstick (``dqn_mine.agent.explore.BumpAndPress``;
+  ``--prefill-explorer bump-and-press`` lets it act during the replay's pre-fill).
 
 ``python -m dqn_mine.bench.explore --tasks two-room --policies uniform --quick`` measures a part.
 
@@ -63,40 +64,6 @@ POLICIES = {p.name: p for p in [
     Policy("fresh ez Ape-X unstick", True, "apex", True, True),
     Policy("bump-and-press", False, "1", False, scripted=True),
 ]}
-
-
-class BumpAndPress:
-    """A scripted undirected explorer, the yardstick for the exploring policies above.
-
-    It walks straight ahead (a uniform random action 5% of the time) until its view stops
-    changing, then presses action 4 once and turns away, left or right at random, for 3-19
-    steps. Like the agents it sees only whether its view changed, but it does what no
-    epsilon-greedy walker does: it tries action 4 at every wall or entity it meets and leaves
-    the wall at once. What it reaches bounds what undirected exploration can hope for.
-    Same interface as :class:`dqn_mine.agent.explore.Explorer` (the greedy actions are ignored).
-    """
-
-    def __init__(self, num_envs: int, rng: np.random.Generator):
-        self.rng = rng
-        self.queued: list[list[int]] = [[] for _ in range(num_envs)]   # turns still to take
-
-    def reset(self, j: int) -> None:
-        self.queued[j] = []
-
-    def act(self, greedy: np.ndarray, stuck: np.ndarray) -> np.ndarray:
-        from dqn_mine.env.interface import FORWARD, INTERACT, NUM_ACTIONS, TURN_LEFT, TURN_RIGHT
-
-        actions = np.full(len(greedy), FORWARD, np.int64)
-        for j, queued in enumerate(self.queued):
-            if queued:
-                actions[j] = queued.pop()
-            elif stuck[j]:
-                actions[j] = INTERACT
-                turn = int(self.rng.integers(TURN_RIGHT, TURN_LEFT + 1))
-                queued.extend([turn] * int(self.rng.integers(3, 20)))
-            elif self.rng.random() < 0.05:
-                actions[j] = int(self.rng.integers(NUM_ACTIONS))
-        return actions
 
 
 def _epsilons(policy: Policy, num_envs: int) -> np.ndarray:
@@ -155,7 +122,7 @@ def _measure(env_kwargs: dict, policy: Policy, episodes: int, num_envs: int, see
              network_kwargs: dict | None) -> dict[str, float]:
     import torch
 
-    from dqn_mine.agent.explore import Explorer
+    from dqn_mine.agent.explore import BumpAndPress, Explorer
     from dqn_mine.agent.network import DuelingQNetwork
     from dqn_mine.env import MineRescueEnv
 

@@ -26,7 +26,7 @@ class ActorBase:
     def __init__(self, cfg: Config, spec: ActorSpec, control, weights, training: bool,
                  parent_pid: int | None = None, render_mode: str | None = None):
         from dqn_mine.agent.acting import ActingCore
-        from dqn_mine.agent.explore import Explorer
+        from dqn_mine.agent.explore import BumpAndPress, Explorer, PrefillFirst
         from dqn_mine.agent.network import DuelingQNetwork, lower_heavy_layers
         from dqn_mine.env import MineRescueEnv
 
@@ -42,6 +42,8 @@ class ActorBase:
                             durations=cfg.exploration == "ez" and (training or cfg.eval_held),
                             mu=cfg.ez_mu, max_duration=cfg.ez_max_duration,
                             unstick=cfg.unstick if training else cfg.eval_unstick)
+        if training and cfg.prefill_explorer == "bump-and-press" and cfg.prefill:
+            explorer = PrefillFirst(BumpAndPress(spec.num_envs, self.rng), explorer, cfg.prefill)
         # Pulled float32 weights are converted on load (WeightBroadcast copies into the tensors).
         self.net = lower_heavy_layers(DuelingQNetwork(**network_shape(cfg)),
                                       resolve_actor_precision(cfg.actor_precision,

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from dqn_mine.agent.explore import is_scripted
 from dqn_mine.config import PHASED_CURRICULA, Config
 from dqn_mine.env.tasks import TASKS, phase_table
 from dqn_mine.metrics import LOW_EPSILON, Rolling
@@ -73,8 +74,9 @@ class Curriculum:
     def record(self, phase: int, ret: float, epsilon: float = float("nan")) -> None:
         """A training episode that started in ``phase``, played at exploration rate ``epsilon``,
         ended with return ``ret``. Every one of the phase counts towards the switch (the
-        study's rule); the low-epsilon mean is only shown (an unknown rate, NaN, is not low)."""
-        if phase == self.phase:
+        study's rule) except the scripted pre-fill walker's, which are not the agent's; the
+        low-epsilon mean is only shown (an unknown rate, NaN, is not low)."""
+        if phase == self.phase and not is_scripted(epsilon):
             self.returns.extend([ret])
             if epsilon <= LOW_EPSILON:
                 self.low_eps_returns.extend([ret])

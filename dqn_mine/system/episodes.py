@@ -8,11 +8,12 @@ from dqn_mine.system.control import Episode
 
 
 class EpisodeStats:
-    """Training episodes (count, rolling return and length; the rolling return of those played
-    at epsilon <= LOW_EPSILON) and evaluation episodes apart."""
+    """Training episodes (count, rewarded count, rolling return and length; the rolling return
+    of those played at epsilon <= LOW_EPSILON) and evaluation episodes apart."""
 
-    def __init__(self, cfg: Config, episodes: int = 0):
+    def __init__(self, cfg: Config, episodes: int = 0, rewarded: int = 0):
         self.episodes = episodes           # training episodes, over every start of the run
+        self.rewarded = rewarded           # of those, the ones with a reward (a delivery)
         self.returns = Rolling(cfg.return_window)
         self.lengths = Rolling(cfg.return_window)
         self.low_eps_returns = Rolling(cfg.return_window)
@@ -26,6 +27,7 @@ class EpisodeStats:
             self.eval_lengths.extend([ep.length])
             return False
         self.episodes += 1
+        self.rewarded += ep.ret > 0
         self.returns.extend([ep.ret])
         self.lengths.extend([ep.length])
         if ep.epsilon <= LOW_EPSILON:

@@ -54,6 +54,7 @@ class Summary:
     env_steps_per_s: float
     replay_ratio: float
     return_episodes: int = 0      # finished episodes (this process) behind episode_return
+    rewarded_episodes: int = 0    # training episodes with a reward, over every start of the run
 
 
 class StopSignals:
@@ -114,7 +115,8 @@ class Run:
         self.generation = int(counters.get("generation", -1)) + 1 if state else 0
         self.steps_offset = int(counters.get("env_steps", 0))
         self.time_offset = float(counters.get("wall_time", 0.0))
-        self.stats = EpisodeStats(cfg, episodes=int(counters.get("episodes", 0)))
+        self.stats = EpisodeStats(cfg, episodes=int(counters.get("episodes", 0)),
+                                  rewarded=int(counters.get("rewarded_episodes", 0)))
         self.curriculum = Curriculum(cfg, phase=counters.get("phase"),
                                      updates=int(counters.get("updates", 0)))
         self.ctx: RunContext | None = None
@@ -143,7 +145,8 @@ class Run:
 
     def counters(self) -> dict:
         return {"updates": self.updates(), "env_steps": self.env_steps(),
-                "episodes": self.stats.episodes, "wall_time": self.wall_time(),
+                "episodes": self.stats.episodes, "rewarded_episodes": self.stats.rewarded,
+                "wall_time": self.wall_time(),
                 "phase": self.curriculum.phase, "num_rooms": self.curriculum.num_rooms,
                 "generation": self.generation}
 
@@ -294,7 +297,8 @@ class Run:
                "phase_return": self.curriculum.phase_return,
                "low_eps_return": stats.low_eps_returns.mean,
                "phase_low_eps_return": self.curriculum.phase_low_eps_return,
-               "target_sync": learner.updater.target_update_interval}
+               "target_sync": learner.updater.target_update_interval,
+               "rewarded_episodes": stats.rewarded}
         row.update({k: (sum(v) / len(v) if v else math.nan) for k, v in agg.items()})
         self.metrics.write(row)
         return row
@@ -339,7 +343,8 @@ class Run:
                        updates_per_s=new_updates / learn_time if learn_time > 0 else 0.0,
                        env_steps_per_s=(steps - self.steps_offset) / run_time,
                        replay_ratio=self.replay_ratio() if learner else math.nan,
-                       return_episodes=len(self.stats.returns))
+                       return_episodes=len(self.stats.returns),
+                       rewarded_episodes=self.stats.rewarded)
 
     def _bar(self, **kwargs):
         from tqdm import tqdm
