@@ -233,6 +233,7 @@ def test_prefill_first_hands_over_to_the_agent_after_its_steps():
         taken[-1] = (taken[-1], actions)
     assert all(np.isinf(eps).all() for eps, _ in taken[:3])
     assert all((eps == 0).all() and (a == greedy).all() for eps, a in taken[3:])
+    assert not explorer.unstick                        # no frame comparisons after the pre-fill
     assert sum((a == 0).sum() for _, a in taken[:3]) >= 4   # mostly straight ahead
 
 

@@ -138,11 +138,16 @@ class PrefillFirst:
 
     def __init__(self, prefill, then: Explorer, steps: int):
         self.prefill, self.then, self.left = prefill, then, steps
-        self.unstick = prefill.unstick or then.unstick   # the core compares frames if either asks
 
     @property
     def current(self):
         return self.prefill if self.left > 0 else self.then
+
+    @property
+    def unstick(self) -> bool:
+        """Whether the acting core compares frames now: the walker needs it, ``then`` may not
+        (the core reads it every step, so the comparisons stop with the pre-fill)."""
+        return self.current.unstick
 
     @property
     def epsilon(self) -> np.ndarray:
