@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from dqn_mine.env.entities import KIT
+from dqn_mine.env.tasks import TASKS
 from dqn_mine.exitcodes import EXIT_BAD_INPUT
 from dqn_mine.play import (
     add_episode_arguments,
@@ -37,7 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
                                  description=__doc__.split("\n\n")[0])
     ap.add_argument("checkpoint", help="run folder or checkpoint.pt")
     ap.add_argument("--episodes", type=int, default=20, help="episodes to play")
-    add_episode_arguments(ap)
+    add_episode_arguments(ap, {name: f"the run's --eval-{name}" for name in RUN_EVAL_KEYS})
     ap.add_argument("--video", default=None, help="video of a scored episode (.gif or .mp4)")
     ap.add_argument("--video-of", choices=VIDEO_OF, default="first",
                     help="which episode --video records: the first, or the first delivered "
@@ -51,6 +52,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 VIDEO_OF = ("first", "delivered")
+# Unset flags take what the run's evaluation actor plays with (the config's key, its default).
+RUN_EVAL_KEYS = {"epsilon": ("eval_epsilon", 0.01), "unstick": ("eval_unstick", False),
+                 "held": ("eval_held", False)}
 
 # How an episode ended, for eval.json's "outcomes": what failed, not only that it did.
 OUTCOMES = ("delivered", "holding the kit", "holding a boulder", "kit dropped",
@@ -141,6 +145,28 @@ def check_settings(args: argparse.Namespace) -> None:
         raise ValueError(f"--video-stride must be at least 1, got {args.video_stride}")
 
 
+def fill_eval_settings(args: argparse.Namespace) -> None:
+    """Unset flags: what the run's evaluation actor plays, so that a first evaluation scores the
+    real thing: the full target task (its --eval-task and room count, fixed placement; no
+    curriculum start) at its exploration settings."""
+    from dqn_mine import checkpoint as ckpt
+
+    trained = ckpt.load(args.checkpoint)["config"]
+    for name, (key, default) in RUN_EVAL_KEYS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, trained.get(key, default))
+    if args.task is None:
+        args.task = trained.get("eval_task") or trained.get("task")
+        if args.task != trained.get("task") and args.max_steps is None:
+            args.max_steps = TASKS[args.task].step_limit   # as the evaluation actor's
+    if args.placement is None:
+        args.placement = "fixed"
+    if args.num_rooms is None and args.task == "rooms":
+        scheduled = trained.get("curriculum") == "schedule"
+        last = trained["rooms_schedule"][-1] if scheduled else None
+        args.num_rooms = trained.get("eval_num_rooms") or last
+
+
 def output_path(args: argparse.Namespace) -> Path:
     if args.out:
         return Path(args.out)
@@ -156,6 +182,7 @@ def main(argv=None) -> int:
         from dqn_mine.machine import single_thread_inference
 
         single_thread_inference()
+        fill_eval_settings(args)
         agent = load_agent(args.checkpoint, epsilon=args.epsilon, seed=args.seed,
                            unstick=args.unstick, held=args.held)
         fill_env_settings(args)
@@ -170,7 +197,8 @@ def main(argv=None) -> int:
             save_video(every_nth(frames, args.video_stride), Path(args.video), 15.0)
     finally:
         env.close()
-    scores.update(task=args.task, epsilon=args.epsilon, unstick=args.unstick, held=args.held,
+    scores.update(task=args.task, placement=args.placement, num_rooms=args.num_rooms,
+                  epsilon=args.epsilon, unstick=args.unstick, held=args.held,
                   checkpoint=str(args.checkpoint))
     out = output_path(args)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -147,13 +147,21 @@ def check_video_path(out: Path, flag: str) -> None:
                          "a .gif needs nothing more")
 
 
-def add_episode_arguments(ap: argparse.ArgumentParser) -> None:
-    """The flags that set up the episodes (``play`` and ``evaluate`` share them)."""
-    ap.add_argument("--epsilon", type=float, default=0.0, help="agent's exploration rate")
-    ap.add_argument("--unstick", action="store_true", help="agent: a random action after a step "
-                    "that left the frame unchanged (as training actors with --unstick act)")
-    ap.add_argument("--held", action="store_true", help="agent: random actions (epsilon's and "
-                    "--unstick's) held as the run's ez training actors hold them")
+PLAY_DEFAULTS = {"epsilon": 0.0, "unstick": False, "held": False}
+
+
+def add_episode_arguments(ap: argparse.ArgumentParser, defaults: dict | None = None) -> None:
+    """The flags that set up the episodes (``play`` and ``evaluate`` share them); ``defaults``
+    describes in ``--help`` how an unset --epsilon, --unstick and --held get their value."""
+    defaults = defaults or PLAY_DEFAULTS
+    ap.add_argument("--epsilon", type=float, default=None,
+                    help=f"agent's exploration rate (default: {defaults['epsilon']})")
+    ap.add_argument("--unstick", action=argparse.BooleanOptionalAction, default=None,
+                    help="agent: a random action after a step that left the frame unchanged "
+                         f"(as training actors with --unstick act; default: {defaults['unstick']})")
+    ap.add_argument("--held", action=argparse.BooleanOptionalAction, default=None,
+                    help="agent: random actions (epsilon's and --unstick's) held as the run's "
+                         f"ez training actors hold them (default: {defaults['held']})")
     ap.add_argument("--task", default=None, help="one-room, two-room, three-room or rooms "
                     "(default: the checkpoint's, else two-room, as for train)")
     ap.add_argument("--num-rooms", type=int, default=None,
@@ -181,7 +189,7 @@ def add_episode_arguments(ap: argparse.ArgumentParser) -> None:
 def check_episode_settings(args: argparse.Namespace) -> None:
     if args.seed < 0:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
-    if not 0.0 <= args.epsilon <= 1.0:
+    if args.epsilon is not None and not 0.0 <= args.epsilon <= 1.0:
         raise ValueError(f"--epsilon must be in [0, 1], got {args.epsilon}")
 
 
@@ -211,6 +219,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         check_output_settings(args, out)
         fill_env_settings(args)
+        for name, value in PLAY_DEFAULTS.items():
+            if getattr(args, name) is None:
+                setattr(args, name, value)
         env = make_env(args)
         policy = POLICIES[args.policy](args)
     except ValueError as exc:  # bad settings, or CheckpointError (a ValueError)

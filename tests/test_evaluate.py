@@ -56,11 +56,34 @@ def test_evaluate_writes_eval_json_and_is_reproducible(run_dir, tmp_path):
     assert (tmp_path / "e.gif").stat().st_size > 0
     assert scores["unstick"] is False
     assert scores["held"] is False
+    assert scores["epsilon"] == 0.01     # the run's --eval-epsilon
     unstuck = evaluate(str(run_dir), "--episodes", "1", "--max-steps", "25", "--unstick",
                        "--held", "--out", str(tmp_path / "unstuck.json"))
     assert unstuck.returncode == 0, unstuck.stderr
     unstuck_scores = json.loads((tmp_path / "unstuck.json").read_text())
     assert unstuck_scores["unstick"] is True and unstuck_scores["held"] is True
+
+
+def test_evaluate_plays_by_default_what_the_runs_evaluation_actor_plays(run_dir, tmp_path):
+    """The run's --eval-epsilon, --eval-unstick and --eval-held, its evaluation task and a fixed
+    placement (a DR run's evaluation actor plays the fixed task); explicit flags still win."""
+    from dqn_mine import checkpoint as ckpt
+    from dqn_mine.config import Config
+
+    saved = ckpt.load(run_dir)
+    cfg = Config.from_dict({**saved["config"], "eval_epsilon": 0.05, "eval_unstick": True,
+                            "placement": "any-room", "eval_task": "two-room"})
+    ckpt.save(tmp_path, saved["updater"], saved["counters"], cfg)
+    res = evaluate(str(tmp_path), "--episodes", "1", "--max-steps", "20")
+    assert res.returncode == 0, res.stderr
+    scores = json.loads((tmp_path / "eval.json").read_text())
+    assert (scores["epsilon"], scores["unstick"], scores["held"]) == (0.05, True, False)
+    assert (scores["task"], scores["placement"]) == ("two-room", "fixed")
+    plain = evaluate(str(tmp_path), "--episodes", "1", "--max-steps", "20", "--epsilon", "0.01",
+                     "--no-unstick", "--out", str(tmp_path / "plain.json"))
+    assert plain.returncode == 0, plain.stderr
+    scores = json.loads((tmp_path / "plain.json").read_text())
+    assert (scores["epsilon"], scores["unstick"]) == (0.01, False)
 
 
 def test_load_agent_plays_an_episode_like_the_readme(run_dir):
