@@ -31,7 +31,7 @@ ACTOR_PRECISIONS = ("auto", "float32", "bfloat16")
 LEARNER_PRECISIONS = ACTOR_PRECISIONS   # auto, or a dtype by name
 EPSILON_SCHEDULES = ("fixed", "apex")
 INIT_PRIORITIES = ("actor", "max")
-CURRICULA = ("none", "adaptive", "uniform", "schedule")
+CURRICULA = ("none", "adaptive", "uniform", "schedule", "backward")
 PHASED_CURRICULA = ("adaptive", "uniform")   # those that start episodes in phases
 EXPLORATIONS = ("epsilon", "ez")
 PREFILL_EXPLORERS = ("agent", "bump-and-press")
@@ -78,11 +78,18 @@ class Config:
     curriculum: str = _f("none", "adaptive: phases 6->1 (three-room and two-room), one "
                          "harder when the rolling return passes the threshold; uniform: every "
                          "episode starts in a phase drawn uniformly, the full task included "
-                         "(no switches); schedule: room counts by share of updates", CURRICULA)
+                         "(no switches); schedule: room counts by share of updates; backward "
+                         "(every task): start on the expert's solution of each episode, d "
+                         "steps before its delivery, d growing by --backward-step as the agent "
+                         "succeeds",
+                         CURRICULA)
+    backward_step: int = _f(10, "backward curriculum: expert steps the start moves back at "
+                            "once, and the width of the frontier the starts are drawn from")
     curriculum_threshold: float = _f(0.6, "rolling mean return that advances a curriculum phase")
     curriculum_window: int = _f(50, "episodes in the rolling mean that advances the curriculum")
-    curriculum_review: float = _f(0.0, "adaptive curriculum: share of episodes that start in an "
-                                  "easier phase already passed (0 = the study's rule)")
+    curriculum_review: float = _f(0.0, "adaptive and backward curricula: share of episodes that "
+                                  "start in an easier phase already passed, or nearer the "
+                                  "reward than the backward frontier (0 = the study's rule)")
     curriculum_review_pick: str = _f("uniform", "which passed phase a review episode starts "
                                      "in: uniform, or nearest (the phase k steps easier with "
                                      "weight 2**-k: most often the one just passed)",
@@ -325,14 +332,12 @@ PRESETS: dict[str, dict[str, Any]] = {
     # - lr 1e-4, target sync every 1,000 updates, weights every 250: fewer updates to learn in
     #   (target sync 250 was tried on seed 1: phases 5-3 came sooner, phase 2 took 20 min
     #   instead of 10, the full task came 4 min later; no gain shown);
-    # - the adaptive curriculum over two-room's phases 6 -> 1 (no undirected exploration found
-    #   the full task's reward), with the evaluation actor on the full task every 500k steps;
-    #   30% of the episodes review a passed phase, so rewards keep flowing after a switch
-    #   (without it the cleared-doorway phase's return fell from 0.5 to 0.01 and the replay's
-    #   rewards to 5e-4); every phase keeps the task's 1,000 steps (with --curriculum-steps
-    #   500 the doorway-cleared phase sat at a return of 0.0-0.08 for 19,000 updates in one
-    #   run: no sign that it helps, and a learning agent's search of room 1 needs the time);
-    # - the agent's own exploration pre-fills: the curriculum's first phases reward it (the
+    # - the backward curriculum (no undirected exploration found the full task's reward): starts
+    #   on the expert's solution of each episode, moving back as the agent succeeds; it reached
+    #   the full task sooner than two-room's six-phase table on the same kind of VM
+    #   (docs/backward.md); the evaluation actor plays the full task every 500k steps; 30% of
+    #   the episodes start nearer the reward (review), so rewards keep flowing after a move;
+    # - the agent's own exploration pre-fills: the curriculum's first starts reward it (the
     #   runs in the README were measured so);
     # - a replay ratio of 0.03 updates per transition: the learner (one core, 60-80 updates/s)
     #   is the bottleneck at any ratio from 0.03 to 0.1, so the ratio only sets the data per
@@ -342,10 +347,10 @@ PRESETS: dict[str, dict[str, Any]] = {
     # - unstick: a random action after a step that left the frame unchanged (a greedy policy
     #   facing a wall otherwise repeats itself); it doubles the episodes that reach room 2. The
     #   evaluation actor unsticks too, so it scores the policy the training actors play at
-    #   epsilon 0.01 (`python -m dqn_mine.evaluate RUN` without --unstick scores it without).
+    #   epsilon 0.01 (`python -m dqn_mine.evaluate RUN` plays so too; --no-unstick without).
     "cpu": {
         "task": "two-room", "actors": 2, "envs_per_actor": 16, "unstick": True,
-        "epsilon_schedule": "apex", "exploration": "ez", "curriculum": "adaptive",
+        "epsilon_schedule": "apex", "exploration": "ez", "curriculum": "backward",
         "curriculum_review": 0.3, "replay_ratio": 0.03,
         "prefill": 20_000, "replay_capacity": 262_144, "updates": 300_000,
         "lr": 1e-4, "target_update_interval": 1000, "publish_interval": 250,
@@ -379,11 +384,20 @@ PRESETS: dict[str, dict[str, Any]] = {
 # training actors do, so that it scores the policy they play at epsilon 0.01: a checkpoint whose
 # training episodes at epsilon <= 0.01 delivered from room 1 holding boulder 0-1 in 48% scored
 # 0 of 16 from there with one-step random actions, 1 of 16 held (docs/three_room.md).
-PRESETS["cpu-three-room"] = {**PRESETS["cpu"], "task": "three-room", "boulder_phases": True,
+PRESETS["cpu-three-room"] = {**PRESETS["cpu"], "task": "three-room", "curriculum": "adaptive",
+                             "boulder_phases": True,
                              "curriculum_review": 0.5, "curriculum_review_unit": "steps",
                              "updates": 600_000, "camera_pitch": 15.0, "room_colours": True,
                              "unstick_cycle": 2, "held_on_top": True, "eval_held": True}
 
+# The rooms task (agent, kit and miner each in a random room, every doorway blocked, 2,000 steps)
+# at any --num-rooms on a few-core CPU machine: the cpu preset's settings (the backward
+# curriculum: no table of starts exists for N rooms) and the look that let the three-room agent
+# tell rooms and held items apart (pitched camera, room colours, the held item on top, two-frame
+# loops unstuck; docs/three_room.md).
+PRESETS["cpu-rooms"] = {**PRESETS["cpu"], "task": "rooms", "updates": 600_000,
+                        "camera_pitch": 15.0, "room_colours": True, "unstick_cycle": 2,
+                        "held_on_top": True, "eval_held": True}
 
 # -- validation --------------------------------------------------------------------------------
 
@@ -427,7 +441,8 @@ def _bound_problems(c: Config) -> list[str]:
                 "publish_interval": 1, "learner_queue": 1, "learner_threads": 0, "eval_every": 0,
                 "eval_video_every": 0, "ez_max_duration": 1, "unstick_cycle": 1,
                 "eval_episodes": 1, "checkpoint_interval": 1, "log_interval": 1,
-                "curriculum_window": 1, "return_window": 1, "seed": 0}
+                "curriculum_window": 1, "return_window": 1, "seed": 0,
+                "backward_step": 1}
     for name, low in at_least.items():
         if getattr(c, name) < low:
             p.append(f"--{_flag(name)} must be at least {low}, got {getattr(c, name)}")

@@ -15,6 +15,9 @@ COLUMNS = (
     "eval_return", "eval_length", "updates_per_s", "env_steps_per_s", "replay_ratio",
     "sampled_reward", "loss", "td_abs", "mean_q", "phase", "beta", "replay_size",
     "phase_return",   # adaptive curriculum: the rolling mean that advances it (current phase only)
+    "start_share",    # backward curriculum: the frontier's starts as a share of the solution
+    "full_task_return",   # rolling mean return of the training episodes begun at the real start
+    "full_task_episodes",   # how many such episodes this process has seen (fills that window)
     # The same two means over the episodes played at an exploration rate of at most LOW_EPSILON:
     # under the Ape-X rates they show what the near-greedy policy does, apart from the envs
     # that mostly explore.
@@ -127,7 +130,8 @@ def progress_postfix(row: dict[str, float]) -> dict[str, str]:
     """The few figures worth watching live in the tqdm bar."""
     keys = {"episode_return": "ret", "eval_return": "eval", "updates_per_s": "upd/s",
             "rewarded_episodes": "rewarded", "env_steps_per_s": "steps/s",
-            "replay_ratio": "ratio", "loss": "loss", "phase": "phase"}
+            "replay_ratio": "ratio", "loss": "loss", "phase": "phase",
+            "phase_return": "phase_ret", "start_share": "share", "full_task_return": "full"}
     out = {}
     for key, short in keys.items():
         value: float | None = row.get(key)

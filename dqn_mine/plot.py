@@ -54,6 +54,9 @@ def full_task_returns(rows: list[dict], cfg, low_eps: bool = False) -> list[tupl
     does not count them); without it the actors' ``episode_return`` once ``return_window``
     episodes have ended. ``low_eps``: the same rows' means over the episodes played at epsilon
     <= 0.01 (``phase_low_eps_return``, ``low_eps_return``)."""
+    if cfg.curriculum == "backward":   # its own column, over episodes begun at the real start
+        return [(r["update"], r["wall_time"] / 60, r["full_task_return"]) for r in rows
+                if r.get("full_task_episodes", 0) >= cfg.return_window and not low_eps]
     if cfg.curriculum not in PHASED_CURRICULA:
         key = "low_eps_return" if low_eps else "episode_return"
         return [(r["update"], r["wall_time"] / 60, r.get(key, math.nan)) for r in rows
@@ -250,6 +253,27 @@ def _save(fig, legend_axis, out: Path, legend_size: int) -> Path:
     return out
 
 
+def _backward(rows: list[dict]) -> bool:
+    """Whether a run started episodes on the expert's path (its starts' share below 1)."""
+    return any(v < 1 for v in column(rows, "start_share"))
+
+
+def _plot_progress(ax, rows: list[dict], color, label: str) -> None:
+    """A run's curriculum in the third panel: the phase or room count, or for the backward
+    curriculum its starts' share of the solution (1: the full task) on a right-hand axis, as
+    its frontier counts expert steps, not phases."""
+    if not _backward(rows):
+        ax.step(column(rows, "update"), column(rows, "phase"), where="post", color=color, lw=2,
+                label=label)
+        return
+    if not hasattr(ax, "share_axis"):
+        ax.share_axis = ax.twinx()
+        ax.share_axis.set_ylabel("backward: start, share of the solution")
+        ax.share_axis.set_ylim(-0.03, 1.03)
+    ax.share_axis.plot(column(rows, "update"), column(rows, "start_share"), color=color, lw=2,
+                       ls="-.", label=f"{label} (start share)")
+
+
 def plot_runs(runs: dict, out: Path) -> Path:
     """runs: label -> metrics rows. One figure, return panels side by side (+ phase panel)."""
     import matplotlib
@@ -270,12 +294,14 @@ def plot_runs(runs: dict, out: Path) -> Path:
             if has_values(rows, "low_eps_return"):   # runs from before it was logged lack it
                 ax.plot(xs, column(rows, "low_eps_return"), color=color, lw=1.2, ls=":",
                         label=f"{label} (envs at epsilon <= {LOW_EPSILON:g})")
+            if _backward(rows):
+                ax.plot(xs, column(rows, "full_task_return"), color=color, lw=1.2, ls="-.",
+                        label=f"{label} (training episodes begun at the real start)")
             if has_values(rows, "eval_return"):
                 ax.plot(xs, column(rows, "eval_return"), color=color, lw=1.5, ls="--",
                         label=f"{label} (evaluation, full task)")
         if curriculum:
-            axes[2].step(column(rows, "update"), column(rows, "phase"), where="post",
-                         color=color, lw=2, label=label)
+            _plot_progress(axes[2], rows, color, label)
     for ax, xlabel in zip(axes, ("network updates", "wall time (minutes)")):
         ax.set_xlabel(xlabel)
         ax.set_ylabel("mean episode return")

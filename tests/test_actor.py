@@ -143,7 +143,8 @@ def test_actor_ends_easier_phases_at_the_curriculum_step_limit():
     the environment really stops there, and the episode record says so."""
     cfg = dataclasses.replace(Config(**PRESETS["cpu"], preset="cpu"), actors=1,
                               envs_per_actor=2, replay_capacity=4096, eval_every=0,
-                              curriculum_steps=25, curriculum_review=0.0).validate()
+                              curriculum="adaptive", curriculum_steps=25,
+                              curriculum_review=0.0).validate()
     net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
     with in_process_actor(cfg, net, phase=6) as actor:
         assert [env.max_episode_steps for env in actor.envs] == [25, 25]
@@ -172,7 +173,7 @@ def test_actor_counts_the_steps_of_its_finished_episodes_for_review_by_steps():
     of the review episodes (started in a phase easier than the shared one)."""
     cfg = dataclasses.replace(Config(**PRESETS["cpu"], preset="cpu"), actors=1,
                               envs_per_actor=4, replay_capacity=4096, eval_every=0,
-                              curriculum_steps=20, curriculum_review=0.5,
+                              curriculum="adaptive", curriculum_steps=20, curriculum_review=0.5,
                               curriculum_review_unit="steps").validate()
     net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
     with in_process_actor(cfg, net, phase=4) as actor:
@@ -221,7 +222,8 @@ def test_actor_reports_episodes_in_start_order_with_episode_order_started(noop_n
     Lengths differ: full-task episodes end at 60 steps, reviews of passed phases at 25."""
     cfg = dataclasses.replace(Config(**PRESETS["cpu"], preset="cpu"), actors=1,
                               envs_per_actor=4, replay_capacity=4096, eval_every=0,
-                              max_episode_steps=60, curriculum_steps=25,
+                              curriculum="adaptive", max_episode_steps=60,
+                              curriculum_steps=25,
                               curriculum_review=0.5).validate()
 
     def reports(order):

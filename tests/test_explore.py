@@ -259,7 +259,7 @@ def test_cpu_preset_is_the_full_two_room_task():
     cfg = parse_args(["--preset", "cpu"])
     assert (cfg.task, cfg.room_size, cfg.max_episode_steps) == ("two-room", 16.0, None)
     assert (cfg.exploration, cfg.epsilon_schedule, cfg.n_step) == ("ez", "apex", 6)
-    assert cfg.curriculum == "adaptive" and cfg.eval_every > 0   # judged on the full task
+    assert cfg.curriculum == "backward" and cfg.eval_every > 0   # judged on the full task
 
 
 def test_a_kit_held_from_the_start_counts_as_picked_up_only_when_taken_again():

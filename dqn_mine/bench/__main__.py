@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-SECTIONS = ["env", "replay", "learner", "system", "explore"]
+SECTIONS = ["env", "replay", "learner", "system", "explore", "starts"]
 
 
 def machine_line() -> str:

@@ -326,3 +326,23 @@ def _segment_distance(px, pz, ax, az, bx, bz) -> float:
     return math.hypot(px - ax - t * dx, pz - az - t * dz)
 
 
+
+
+def solve(env: MineEnv, seed: int, step_limit: int) -> list[int]:
+    """The expert's actions from the start of the episode ``env.reset(seed=seed)`` to the
+    delivery, planned on the unrendered world (``MineEnv.advance``); the env is left wherever
+    the plan ended, so reset it before playing. Raises if the expert needs more than
+    ``step_limit`` steps (every task's episodes are solvable within its limit: tested)."""
+    env.reset(seed=seed)
+    expert = Expert(env)
+    actions = []
+    for _ in range(step_limit):
+        action = expert.act()
+        actions.append(action)
+        if env.advance(action):
+            return actions
+    raise Unsolved(f"the expert did not deliver within {step_limit} steps (seed {seed})")
+
+
+class Unsolved(RuntimeError):
+    """The expert's plan did not deliver within the step limit it was given."""

@@ -145,19 +145,30 @@ class MineEnv(gym.Env):
         self._draw_visuals()
         self._walk = self.layout.rects(AGENT_RADIUS)
         self._entities_changed(static=True)
-        obs = self._observe()
-        info = {"carrying": self.carrying is not None, "carrying_kit": self._carrying_kit(),
+        return self._observe(), self._info()
+
+    def _info(self) -> dict:
+        """What ``reset`` reports about the start."""
+        return {"carrying": self.carrying is not None, "carrying_kit": self._carrying_kit(),
                 "agent_room": self.agent_room, "kit_room": self.room_of(self.kit),
-                "miner_room": self.room_of(self.miner),
-                "num_rooms": len(self.layout.rooms)}
-        return obs, info
+                "miner_room": self.room_of(self.miner), "num_rooms": len(self.layout.rooms)}
 
     def step(self, action):
         if action.__class__ is not int:
             action = _as_action(action)
         elif not 0 <= action < NUM_ACTIONS:
             raise ValueError(f"action must be an integer in 0..5, got {action}")
-        terminated = False
+        terminated = self.advance(action)
+        self.steps += 1
+        truncated = not terminated and self.steps >= self.max_episode_steps
+        carrying = self.carrying
+        info = {"carrying": carrying is not None,
+                "carrying_kit": carrying is not None and carrying.kind == KIT}
+        return self._observe(), (1.0 if terminated else 0.0), terminated, truncated, info
+
+    def advance(self, action: int) -> bool:
+        """Apply a valid ``action`` to the world without rendering or counting a step; True on
+        delivery. ``step`` is this plus the frame; the expert plans and replays with it alone."""
         if action == FORWARD:
             self._move(FORWARD_STEP)
         elif action == BACKWARD:
@@ -167,13 +178,20 @@ class MineEnv(gym.Env):
         elif action == TURN_LEFT:
             self.heading = (self.heading - 1) % HEADINGS
         elif action == INTERACT:
-            terminated = self._interact()
-        self.steps += 1
-        truncated = not terminated and self.steps >= self.max_episode_steps
-        carrying = self.carrying
-        info = {"carrying": carrying is not None,
-                "carrying_kit": carrying is not None and carrying.kind == KIT}
-        return self._observe(), (1.0 if terminated else 0.0), terminated, truncated, info
+            return self._interact()
+        return False
+
+    def fast_forward(self, actions) -> tuple[np.ndarray, dict]:
+        """Play ``actions`` from the current state unrendered (none may deliver), then start the
+        episode's step count afresh there: the observation and info of that state, as
+        ``reset`` returns them. A start on the expert's path costs a reset and a replay, not
+        the plan (see ``dqn_mine.env.expert.solve``)."""
+        for action in actions:
+            if self.advance(int(action)):
+                raise ValueError("fast_forward: the actions deliver; a start must precede it")
+        self.steps = 0
+        self._expert = None
+        return self._observe(), self._info()
 
     def render(self):
         """First-person view (upscaled 6x) and the top-down map side by side, uint8 (H, W, 3)."""

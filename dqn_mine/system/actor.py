@@ -15,6 +15,8 @@ import time
 import numpy as np
 
 from dqn_mine.config import Config, network_shape, resolve_actor_precision
+from dqn_mine.system.backward import PathStarts
+from dqn_mine.system.control import Episode
 from dqn_mine.system.curriculum import Curriculum
 from dqn_mine.system.pacing import ActorPace
 from dqn_mine.system.specs import ActorSpec
@@ -57,14 +59,24 @@ class ActorBase:
         self.returns = np.zeros(spec.num_envs)
         self.lengths = np.zeros(spec.num_envs, dtype=np.int64)
         self.phases = np.zeros(spec.num_envs, dtype=np.int64)   # each episode's start phase
+        self.full = np.ones(spec.num_envs, dtype=bool)          # ... whether the real start
+        self.shares = np.full(spec.num_envs, np.nan)            # ... backward: its share
         self.steps = 0
         self.episodes = 0
 
     def start_envs(self) -> None:
         """Reset every environment with its seed (the first episode of each)."""
-        for j, env in enumerate(self.envs):
-            self.apply_curriculum(j)
-            self._begin(j, *env.reset(seed=self.spec.seed * 1000 + j))
+        for j in range(len(self.envs)):
+            self.new_episode(j, seed=self.spec.seed * 1000 + j)
+
+    def new_episode(self, j: int, seed: int | None = None) -> None:
+        """Start environment j's next episode where the curriculum says."""
+        self.apply_curriculum(j)
+        self._begin(j, *self.reset_env(j, seed))
+
+    def reset_env(self, j: int, seed: int | None) -> tuple:
+        """(obs, info) of environment j's next episode."""
+        return self.envs[j].reset(seed=seed)
 
     def pull_weights(self) -> None:
         version = self.weights.pull(self.net, self.version)
@@ -72,8 +84,8 @@ class ActorBase:
             self.version = version
 
     def apply_curriculum(self, j: int) -> None:
-        """Between episodes: the phase environment j's next episode is recorded under."""
-        self.phases[j] = self.control.phase
+        """Between episodes: where environment j's next episode starts (the evaluation actor:
+        always the full task, recorded as phase 0 and ``full``)."""
 
     # -- stepping ------------------------------------------------------------------------------
     def step(self) -> int:
@@ -101,15 +113,15 @@ class ActorBase:
         self.returns[j], self.lengths[j] = 0.0, 0
 
     def _end_episode(self, j: int) -> None:
-        record = (float(self.returns[j]), int(self.lengths[j]), int(self.phases[j]),
-                  float(self.core.explorer.epsilon[j]))
+        record = Episode(self.spec.index, float(self.returns[j]), int(self.lengths[j]),
+                         int(self.phases[j]), self.spec.evaluates,
+                         float(self.core.explorer.epsilon[j]), bool(self.full[j]),
+                         float(self.shares[j]))
         self.episodes += 1
         self.between_episodes(j)
-        self.apply_curriculum(j)
-        self._begin(j, *self.envs[j].reset())
-        for ret, length, phase, epsilon in self.reported(j, record):
-            self.control.record_episode(self.spec.index, ret, length, phase,
-                                        is_eval=self.spec.evaluates, epsilon=epsilon)
+        self.new_episode(j)
+        for episode in self.reported(j, record):
+            self.control.record_episode(episode)
 
     def reported(self, j: int, record: tuple) -> list[tuple]:
         """The finished episodes to report now that environment j's episode ended with
@@ -171,6 +183,9 @@ class Actor(ActorBase):
         self.curriculum = Curriculum(cfg)
         self.pace = ActorPace(cfg, control)
         super().__init__(cfg, spec, control, weights, training=True, parent_pid=parent_pid)
+        self.to_go = np.zeros(spec.num_envs, dtype=np.int64)   # backward: each start's
+        self.paths = [PathStarts(np.random.default_rng([spec.seed, j]), env.max_episode_steps)
+                      for j, env in enumerate(self.envs)] if self.curriculum.backward else None
         self.writers = [NStepWriter(storage, stream=s, eta=cfg.eta) for s in spec.streams]
         self.order = StartOrder(spec.num_envs) if cfg.episode_order == "started" else None
         self.start_envs()
@@ -181,11 +196,24 @@ class Actor(ActorBase):
     def apply_curriculum(self, j: int) -> None:
         """Read the shared curriculum state and set it on environment j (the episode is recorded
         under the phase it started in)."""
+        if self.curriculum.backward:
+            self.phases[j], self.to_go[j] = self.curriculum.backward_start(self.control.phase,
+                                                                           self.rng)
+            return
         phase, settings = self.curriculum.episode_start(self.control.phase,
                                                         self.control.num_rooms, self.rng)
-        self.phases[j] = phase
+        self.phases[j], self.full[j] = phase, self.curriculum.is_full_task(phase)
         for name, value in settings.items():
             setattr(self.envs[j], name, value)
+
+    def reset_env(self, j: int, seed: int | None) -> tuple:
+        """Backward: on the expert's path of a seed of the env's own (``seed`` is for the
+        first episode of an env that follows the task's own starts)."""
+        if self.paths is None:
+            return super().reset_env(j, seed)
+        obs, info, self.full[j], self.shares[j] = self.paths[j].reset(self.envs[j],
+                                                                      int(self.to_go[j]))
+        return obs, info
 
     def _begin(self, j: int, obs: np.ndarray, info: dict) -> None:
         super()._begin(j, obs, info)

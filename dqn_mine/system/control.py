@@ -25,6 +25,8 @@ class Episode(NamedTuple):
     phase: int
     is_eval: bool
     epsilon: float = float("nan")   # the rate of the env that played it (NaN: unknown)
+    full_task: bool = True          # it began at the task's real start (no curriculum start)
+    start_share: float = float("nan")   # backward: its start's expert steps to go / solution
 
 
 class Control:
@@ -36,7 +38,8 @@ class Control:
         self.phase_cell = blocks["ctl_phase"]          # [1] adaptive curriculum phase (0: none)
         self.rooms_cell = blocks["ctl_rooms"]          # [1] scheduled room count (0: none)
         self.actor_steps = blocks["ctl_actor_steps"]   # [A] env steps per actor
-        self.ep_ring = blocks["ctl_ep_ring"]           # [A, K, 5] ret, length, phase, is_eval, eps
+        # [A, K, 7] ret, length, phase, is_eval, eps, full_task, start_share
+        self.ep_ring = blocks["ctl_ep_ring"]
         self.ep_written = blocks["ctl_ep_written"]     # [A] records written per actor
         self._ep_read = np.zeros(len(self.ep_written), dtype=np.int64)  # reader-local cursor
 
@@ -50,7 +53,8 @@ class Control:
             BlockSpec("ctl_phase", (1,), "i8", fill=0),
             BlockSpec("ctl_rooms", (1,), "i8", fill=0),
             BlockSpec("ctl_actor_steps", (a,), "i8", fill=0),
-            BlockSpec("ctl_ep_ring", (a, EPISODE_RING, 5), "f8", fill=np.nan),
+            BlockSpec("ctl_ep_ring", (a, EPISODE_RING, len(Episode._fields) - 1), "f8",
+                      fill=np.nan),
             BlockSpec("ctl_ep_written", (a,), "i8", fill=0),
         ]
 
@@ -87,12 +91,12 @@ class Control:
         return int(self.actor_steps.sum())
 
     # -- episode records ---------------------------------------------------------------------
-    def record_episode(self, actor: int, ret: float, length: int, phase: int,
-                       is_eval: bool = False, epsilon: float = float("nan")) -> None:
-        """Writer side (actor ``actor`` only): fill the slot, then publish by bumping the count."""
-        n = int(self.ep_written[actor])
-        self.ep_ring[actor, n % EPISODE_RING] = (ret, length, phase, float(is_eval), epsilon)
-        self.ep_written[actor] = n + 1
+    def record_episode(self, ep: Episode) -> None:
+        """Writer side (actor ``ep.actor`` only): fill the slot, then publish by bumping the
+        count."""
+        n = int(self.ep_written[ep.actor])
+        self.ep_ring[ep.actor, n % EPISODE_RING] = tuple(map(float, ep[1:]))
+        self.ep_written[ep.actor] = n + 1
 
     def drain_episodes(self) -> list[Episode]:
         """Reader side (the learner): every record published since the last call."""
@@ -100,8 +104,9 @@ class Control:
         for actor, written in enumerate(self.ep_written.copy()):
             start = max(int(self._ep_read[actor]), int(written) - EPISODE_RING)
             for n in range(start, int(written)):
-                ret, length, phase, is_eval, eps = self.ep_ring[actor, n % EPISODE_RING]
+                ret, length, phase, is_eval, eps, full, share = self.ep_ring[
+                    actor, n % EPISODE_RING]
                 out.append(Episode(actor, float(ret), int(length), int(phase), bool(is_eval),
-                                   float(eps)))
+                                   float(eps), bool(full), float(share)))
             self._ep_read[actor] = written
         return out

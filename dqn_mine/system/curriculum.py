@@ -1,6 +1,6 @@
 """The curriculum: which phase, or how many rooms, the training episodes start with.
 
-Two kinds (``--curriculum``):
+The kinds (``--curriculum``):
 
 - ``adaptive`` (two-room and three-room): ``phase`` runs from the task's easiest phase down to 1,
   the full task. It moves one phase harder once the mean return of the last ``window`` episodes,
@@ -14,6 +14,12 @@ Two kinds (``--curriculum``):
   ``phase`` stays 1 and ``phase_return`` is the full task's episodes' return.
 - ``schedule`` (the rooms task): ``num_rooms`` follows the room counts of the schedule, each for
   an equal share of the updates.
+- ``backward`` (every task): episodes start on the scripted expert's solution of the episode,
+  ``phase`` = d expert steps before its delivery (``dqn_mine.system.backward``). Each start is
+  drawn in the frontier (d - step, d]; d moves ``backward_step`` further back once the mean return
+  of the last ``window`` frontier episodes exceeds ``threshold``, unless all of them were the full
+  task (a start at least the solution's length). With ``review`` > 0 that share of the episodes
+  starts nearer the reward, in [1, d - step] (recorded as phase ``REVIEW``).
 
 The object holds no processes and no shared memory: the runner feeds it finished episodes and the
 update count and copies ``phase`` and ``num_rooms`` to the shared control block; every actor
@@ -30,10 +36,11 @@ from dqn_mine.env.tasks import TASKS, phase_table
 from dqn_mine.metrics import LOW_EPSILON, Rolling
 
 DR_PHASE = 0    # what a domain-randomised episode of the adaptive curriculum is recorded under
+REVIEW = -1     # what a backward curriculum's review episode is recorded under
 
 
 class Curriculum:
-    """State of a run's curriculum; ``kind`` is "none", "adaptive" or "schedule"."""
+    """State of a run's curriculum; ``kind`` is one of ``CURRICULA``."""
 
     def __init__(self, cfg: Config, phase: int | None = None, updates: int = 0):
         """``phase``: a resumed run's adaptive phase (None: start at the easiest); ``updates``:
@@ -50,6 +57,8 @@ class Curriculum:
         self.rooms_schedule = tuple(cfg.rooms_schedule)
         self.total_updates = cfg.updates
         self.phased = self.kind in PHASED_CURRICULA
+        self.backward = self.kind == "backward"
+        self.step = cfg.backward_step
         self.easiest = max(phase_table(cfg.task, cfg.boulder_phases)) if self.phased else 0
         # adaptive: the current phase (1 = the full task); uniform: 1; 0 without phases
         self.phase = self._start_phase(phase)
@@ -60,24 +69,29 @@ class Curriculum:
         self.phase_steps = cfg.curriculum_steps
         self.full_steps = cfg.max_episode_steps or TASKS[cfg.task].step_limit
         self.returns = Rolling(self.window)             # current phase's episodes only
+        self.shares = Rolling(self.window)      # backward: their starts' shares of the solution
         self.low_eps_returns = Rolling(self.window)     # those of them at epsilon <= LOW_EPSILON
         self._follow_schedule(updates)
 
     def _start_phase(self, resumed: int | None) -> int:
         if self.kind == "uniform":
             return 1
+        if self.backward:
+            return self.step if resumed is None else int(resumed)
         if self.kind != "adaptive" or resumed is None:
             return self.easiest
         return int(resumed)
 
     # -- the runner's side ---------------------------------------------------------------------
-    def record(self, phase: int, ret: float, epsilon: float = float("nan")) -> None:
+    def record(self, phase: int, ret: float, epsilon: float = float("nan"),
+               share: float = float("nan")) -> None:
         """A training episode that started in ``phase``, played at exploration rate ``epsilon``,
         ended with return ``ret``. Every one of the phase counts towards the switch (the
         study's rule) except the scripted pre-fill walker's, which are not the agent's; the
         low-epsilon mean is only shown (an unknown rate, NaN, is not low)."""
         if phase == self.phase and not is_scripted(epsilon):
             self.returns.extend([ret])
+            self.shares.extend([share])
             if epsilon <= LOW_EPSILON:
                 self.low_eps_returns.extend([ret])
 
@@ -85,12 +99,21 @@ class Curriculum:
         """After a batch of recorded episodes: one phase harder when the rolling mean of the
         last ``window`` episodes of the current phase exceeds the threshold; the schedule's room
         count for ``updates`` updates."""
-        if self.kind == "adaptive" and self.phase > 1 and len(self.returns) == self.window \
-                and self.returns.mean > self.threshold:
+        if self.kind == "adaptive" and self.phase > 1 and self._passed():
             self.phase -= 1
-            self.returns.clear()
-            self.low_eps_returns.clear()
+            self._clear()
+        if self.backward and self.phase < self.full_steps and self._passed() \
+                and self.shares.mean < 1.0:     # all full-task starts: nowhere further back
+            self.phase = min(self.full_steps, self.phase + self.step)
+            self._clear()
         self._follow_schedule(updates)
+
+    def _passed(self) -> bool:
+        return len(self.returns) == self.window and self.returns.mean > self.threshold
+
+    def _clear(self) -> None:
+        for rolling in (self.returns, self.low_eps_returns, self.shares):
+            rolling.clear()
 
     def _follow_schedule(self, updates: int) -> None:
         if self.kind != "schedule":
@@ -100,14 +123,33 @@ class Curriculum:
         self.num_rooms = int(stages[stage])
 
     @property
+    def starts_phases(self) -> bool:
+        """Whether this curriculum sets where episodes start (tables or the expert's path)."""
+        return self.phased or self.backward
+
+    @property
     def phase_return(self) -> float:
-        """Rolling mean return of the current phase (NaN without the adaptive curriculum)."""
-        return self.returns.mean if self.phased else float("nan")
+        """Rolling mean return of the current phase's (backward: frontier's) episodes; NaN
+        when episodes start as the task does."""
+        return self.returns.mean if self.starts_phases else float("nan")
 
     @property
     def phase_low_eps_return(self) -> float:
         """The same over the current phase's episodes at epsilon <= LOW_EPSILON (NaN if none)."""
-        return self.low_eps_returns.mean if self.phased else float("nan")
+        return self.low_eps_returns.mean if self.starts_phases else float("nan")
+
+    @property
+    def start_share(self) -> float:
+        """Backward: the frontier episodes' starts as a mean share of their solutions (1: the
+        full task); 1 when every episode starts as the task does."""
+        if self.backward:
+            return self.shares.mean
+        return float("nan") if self.phased else 1.0
+
+    def is_full_task(self, phase: int) -> bool:
+        """Whether an episode recorded under ``phase`` (not backward) began at the task's
+        real start."""
+        return not self.phased or phase == 1
 
     @property
     def logged_phase(self) -> int:
@@ -115,6 +157,15 @@ class Curriculum:
         return self.num_rooms if self.kind == "schedule" else self.phase
 
     # -- an actor's side -----------------------------------------------------------------------
+    def backward_start(self, d: int, rng: np.random.Generator) -> tuple[int, int]:
+        """(phase recorded with the episode, expert steps to go at its start) while the shared
+        state says frontier ``d``: in the frontier (d - step, d], or with probability
+        ``review`` (once d has moved) nearer, in [1, d - step]."""
+        low = max(1, d - self.step + 1)
+        if low > 1 and self.review and self._reviews(rng):
+            return REVIEW, int(rng.integers(1, low))
+        return d, int(rng.integers(low, d + 1))
+
     def episode_start(self, phase: int, num_rooms: int, rng: np.random.Generator) -> tuple:
         """(phase recorded with the episode, environment settings) for an episode that starts
         while the shared state says ``phase`` and ``num_rooms``."""
@@ -135,6 +186,10 @@ class Curriculum:
         phase easier than the current one count as review (also those started before a switch:
         they are what the replay gets from passed phases)."""
         self.all_steps += steps
+        if self.backward:
+            self.played_steps += steps
+            self.review_steps += steps if phase == REVIEW else 0
+            return
         if phase == DR_PHASE:
             self.dr_steps += steps
             return      # neither the current phase's nor a review: outside that count

@@ -17,6 +17,8 @@ class EpisodeStats:
         self.returns = Rolling(cfg.return_window)
         self.lengths = Rolling(cfg.return_window)
         self.low_eps_returns = Rolling(cfg.return_window)
+        self.full_returns = Rolling(cfg.return_window)      # those begun at the real start
+        self.full_episodes = 0                              # ... how many, in this process
         self.eval_returns = Rolling(cfg.eval_episodes)
         self.eval_lengths = Rolling(cfg.eval_episodes)
 
@@ -30,6 +32,9 @@ class EpisodeStats:
         self.rewarded += ep.ret > 0
         self.returns.extend([ep.ret])
         self.lengths.extend([ep.length])
+        if ep.full_task:
+            self.full_returns.extend([ep.ret])
+            self.full_episodes += 1
         if ep.epsilon <= LOW_EPSILON:
             self.low_eps_returns.extend([ep.ret])
         return True

@@ -154,7 +154,7 @@ class Run:
         """Take in the finished episodes; the curriculum follows, the actors read it back."""
         for ep in self.ctx.control.drain_episodes():
             if self.stats.add(ep):
-                self.curriculum.record(ep.phase, ep.ret, ep.epsilon)
+                self.curriculum.record(ep.phase, ep.ret, ep.epsilon, ep.start_share)
         self.curriculum.advance(self.updates())
         self.ctx.control.show_curriculum(self.curriculum)
         self.follow_target_schedule()
@@ -295,6 +295,9 @@ class Run:
                "replay_ratio": self.replay_ratio(), "phase": self.curriculum.logged_phase,
                "beta": learner.beta(), "replay_size": learner.replay_size(),
                "phase_return": self.curriculum.phase_return,
+               "start_share": self.curriculum.start_share,
+               "full_task_return": stats.full_returns.mean,
+               "full_task_episodes": stats.full_episodes,
                "low_eps_return": stats.low_eps_returns.mean,
                "phase_low_eps_return": self.curriculum.phase_low_eps_return,
                "target_sync": learner.updater.target_update_interval,
