@@ -52,9 +52,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 VIDEO_OF = ("first", "delivered")
-# Unset flags take what the run's evaluation actor plays with (the config's key, its default).
-RUN_EVAL_KEYS = {"epsilon": ("eval_epsilon", 0.01), "unstick": ("eval_unstick", False),
-                 "held": ("eval_held", False)}
+# Unset flags take what the run's evaluation actor plays with: flag -> the config's key.
+RUN_EVAL_KEYS = {"epsilon": "eval_epsilon", "unstick": "eval_unstick", "held": "eval_held"}
 
 # How an episode ended, for eval.json's "outcomes": what failed, not only that it did.
 OUTCOMES = ("delivered", "holding the kit", "holding a boulder", "kit dropped",
@@ -150,11 +149,12 @@ def fill_eval_settings(args: argparse.Namespace) -> None:
     real thing: the full target task (its --eval-task and room count, fixed placement; no
     curriculum start) at its exploration settings."""
     from dqn_mine import checkpoint as ckpt
+    from dqn_mine.config import Config
 
     trained = ckpt.load(args.checkpoint)["config"]
-    for name, (key, default) in RUN_EVAL_KEYS.items():
-        if getattr(args, name) is None:
-            setattr(args, name, trained.get(key, default))
+    for name, key in RUN_EVAL_KEYS.items():
+        if getattr(args, name) is None:   # a config saved before the key: Config's default
+            setattr(args, name, trained.get(key, Config.__dataclass_fields__[key].default))
     if args.task is None:
         args.task = trained.get("eval_task") or trained.get("task")
         if args.task != trained.get("task") and args.max_steps is None:
