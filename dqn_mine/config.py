@@ -195,6 +195,17 @@ class Config:
     eta: float = _f(1e-5, "added to |TD error| so no priority is zero")
     init_priority: str = _f("actor", "priority of new transitions: actor (from the actor's "
                             "network) or max (largest so far)", INIT_PRIORITIES)
+    # DQfD (Hester et al. 2018): its margin, loss weight and priority bonus are the defaults.
+    demos: int = _f(0, "expert episodes played before acting and kept in the replay for the "
+                    "whole run, never overwritten (DQfD demonstrations; 0 = none)")
+    demos_from: Optional[str] = _f(None, "a folder of recorded demonstrations to keep instead "
+                                   "(python -m dqn_mine.play --record DIR)")
+    demo_bonus: float = _f(1.0, "added to a demonstration's priority")
+    demo_margin: float = _f(0.8, "large-margin loss: the demonstrated action must beat every "
+                            "other by this much")
+    demo_loss_weight: float = _f(1.0, "weight of the large-margin loss on demonstrations "
+                                 "(0 = off)")
+    demo_pretrain: int = _f(0, "updates on the demonstrations alone before the actors start")
     save_replay: Optional[str] = _f(None, "also save the replay to this folder at the end "
                                     "(large; size printed first); --resume reads it back and "
                                     "skips the pre-fill")
@@ -442,7 +453,7 @@ def _bound_problems(c: Config) -> list[str]:
                 "eval_video_every": 0, "ez_max_duration": 1, "unstick_cycle": 1,
                 "eval_episodes": 1, "checkpoint_interval": 1, "log_interval": 1,
                 "curriculum_window": 1, "return_window": 1, "seed": 0,
-                "backward_step": 1}
+                "backward_step": 1, "demos": 0, "demo_pretrain": 0}
     for name, low in at_least.items():
         if getattr(c, name) < low:
             p.append(f"--{_flag(name)} must be at least {low}, got {getattr(c, name)}")
@@ -498,6 +509,18 @@ def _rate_problems(c: Config) -> list[str]:
         p.append(f"--max-grad-norm must be >= 0 (0 = off), got {c.max_grad_norm}")
     if c.replay_ratio is not None and not c.replay_ratio > 0:
         p.append(f"--replay-ratio must be positive, got {c.replay_ratio}")
+    return p + _demo_problems(c)
+
+
+def _demo_problems(c: Config) -> list[str]:
+    p = []
+    for name in ("demo_bonus", "demo_margin", "demo_loss_weight"):
+        if not 0.0 <= getattr(c, name) < math.inf:
+            p.append(f"--{_flag(name)} must be >= 0, got {getattr(c, name)}")
+    if c.demos and c.demos_from:
+        p.append("--demos and --demos-from are two sources of demonstrations: give one")
+    if c.demo_pretrain and not (c.demos or c.demos_from):
+        p.append("--demo-pretrain trains on demonstrations: add --demos N or --demos-from DIR")
     return p
 
 

@@ -24,6 +24,8 @@ COLUMNS = (
     "low_eps_return", "phase_low_eps_return",
     "target_sync",    # updates between target syncs at this row (--target-update-early moves it)
     "rewarded_episodes",   # training episodes with a reward so far (the pre-fill's included)
+    "demo_share",     # --demos: the share of demonstrations in the sampled batches
+    "margin_loss",    # --demos: the large-margin loss, mean over the sampled demonstrations
 )
 LOW_EPSILON = 0.01   # the study's rate: an env at or below it plays (almost) its greedy policy
 

@@ -2,6 +2,10 @@
 and map).
 
     python -m dqn_mine.play --policy expert --task rooms --num-rooms 4 --out runs/play/expert.gif
+    python -m dqn_mine.play --policy expert --episodes 200 --record demos/two-room
+
+``--record DIR`` writes the episodes as demonstrations a run loads with ``--demos-from DIR``
+(format: ``dqn_mine/demos.py``) instead of a video.
 
 A policy is a callable ``policy(env, obs, info) -> action``; ``POLICIES`` maps a name to a factory
 ``factory(args) -> policy`` so that new kinds (a trained checkpoint) plug in by adding one entry.
@@ -57,6 +61,15 @@ def agent_policy(args: argparse.Namespace) -> Policy:
     single_thread_inference()
     return AgentPolicy.from_checkpoint(args.checkpoint, epsilon=args.epsilon, seed=args.seed,
                                        unstick=args.unstick, held=args.held)
+
+
+def manual(args: argparse.Namespace) -> Callable:
+    """A person at the keyboard (``dqn_mine.manual``): a window, or keys from --keys."""
+    from dqn_mine.manual import manual_policy, stdin_keys
+
+    if args.keys is None:
+        return manual_policy()
+    return manual_policy(stdin_keys(sys.stdin if args.keys == "-" else open(args.keys)))
 
 
 POLICIES: dict[str, Callable[[argparse.Namespace], Policy]] = {
@@ -139,6 +152,18 @@ def check_output_settings(args: argparse.Namespace, out: Path) -> None:
     check_video_path(out, "--out")
 
 
+def check_record_settings(args: argparse.Namespace) -> None:
+    check_episode_settings(args)
+    if args.keys not in (None, "-") and not Path(args.keys).is_file():
+        raise ValueError(f"--keys {args.keys}: no such file")
+    if args.episodes < 1:
+        raise ValueError(f"--episodes must be at least 1, got {args.episodes}")
+    folder = Path(args.record)
+    if folder.exists() and (not folder.is_dir() or any(folder.iterdir())):
+        raise ValueError(f"--record {folder}: not an empty folder (demonstrations are never "
+                         "mixed into an existing set)")
+
+
 def check_video_path(out: Path, flag: str) -> None:
     if out.suffix.lower() not in (".gif", ".mp4") or out.is_dir():
         raise ValueError(f"{flag} must name a .gif or .mp4 file, got {out}")
@@ -205,28 +230,73 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--fps", type=float, default=15.0, help="frames per second of the video")
     ap.add_argument("--out", default=None, help="video to write, .gif or .mp4 (MP4: much smaller, "
                     "needs imageio-ffmpeg; default runs/play/<policy>.gif)")
+    ap.add_argument("--record", default=None, metavar="DIR",
+                    help="write the episodes as demonstrations to DIR (for train's --demos-from) "
+                         "instead of a video")
+    ap.add_argument("--manual", action="store_true",
+                    help="play by hand and record it (needs --record): a window where a display "
+                         "exists (w/s/a/d or arrows, space acts, q ends the episode)")
+    ap.add_argument("--keys", default=None, metavar="FILE",
+                    help="--manual: read the key presses as characters from FILE (- = standard "
+                         "input; the default without a display) instead of a window")
+    ap.add_argument("--episodes", type=int, default=1,
+                    help="episodes to record with --record (seeds --seed, --seed + 1, ...)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     return ap
 
 
+def record_demos(env, policy: Policy, args: argparse.Namespace) -> int:
+    """``--record``: ``--episodes`` episodes of ``policy`` written as demonstrations."""
+    from tqdm import tqdm
+
+    from dqn_mine import demos
+
+    folder = Path(args.record)
+    paths, delivered = [], 0
+    act = policy if args.manual else lambda env, obs, info, t: policy(env, obs, info)
+    for i in tqdm(range(args.episodes), desc="recording", unit="ep",
+                  disable=args.quiet or args.manual):
+        ep = demos.record_policy(env, act, args.seed + i)
+        if ep.steps == 0:      # stopped before a step: nothing to keep
+            continue
+        paths.append(demos.save_episode(folder, len(paths), ep))
+        delivered += ep.terminated
+    if not paths:
+        print("no episode was recorded", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    demos.write_meta(folder, paths, {key: getattr(args, key) for key in ENV_DEFAULTS})
+    print(f"{args.policy} on {args.task}: {len(paths)} episodes (seeds from {args.seed}), "
+          f"{delivered} delivered -> {folder}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    args.policy = args.policy or ("agent" if args.checkpoint else "expert")
+    if args.manual and args.record is None:
+        print("error: --manual records demonstrations: add --record DIR", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    args.policy = "manual" if args.manual else \
+        args.policy or ("agent" if args.checkpoint else "expert")
     if args.policy == "agent" and not args.checkpoint:
         print("error: --policy agent needs --checkpoint RUN_DIR", file=sys.stderr)
         return EXIT_BAD_INPUT
     out = Path(args.out or f"runs/play/{args.policy}.gif")
     try:
-        check_output_settings(args, out)
+        if args.record is None:
+            check_output_settings(args, out)
+        else:
+            check_record_settings(args)
         fill_env_settings(args)
         for name, value in PLAY_DEFAULTS.items():
             if getattr(args, name) is None:
                 setattr(args, name, value)
         env = make_env(args)
-        policy = POLICIES[args.policy](args)
+        policy = manual(args) if args.manual else POLICIES[args.policy](args)
     except ValueError as exc:  # bad settings, or CheckpointError (a ValueError)
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    if args.record is not None:
+        return record_demos(env, policy, args)
     frames, total, steps = record(env, policy, args.seed, progress=not args.quiet)
     env.close()
     save_video(frames, out, args.fps)

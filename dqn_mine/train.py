@@ -56,9 +56,22 @@ def check_saved_replay(cfg: Config) -> None:
     path = saved_replay(cfg)
     if path is not None:
         try:
-            snapshot.check(path, replay_layout(cfg))
+            snapshot.check(path, replay_layout(cfg, snapshot.demo_streams(path)))
         except snapshot.SnapshotError as exc:
             raise ConfigError(str(exc)) from None
+
+
+def check_demos(cfg: Config) -> None:
+    """A --demos-from folder must hold readable episodes that fit the replay's rings."""
+    from dqn_mine.demos import DemoError, episode_files, pack, read_lengths
+    from dqn_mine.system.layout import replay_layout
+
+    if cfg.demos_from:
+        try:
+            pack(read_lengths(episode_files(cfg.demos_from)),
+                 replay_layout(cfg).stream_capacity - cfg.frame_stack + 1)
+        except DemoError as exc:
+            raise ConfigError(f"--demos-from: {exc}") from None
 
 
 def open_run(cfg: Config) -> tuple[Config, Path, dict | None]:
@@ -69,6 +82,7 @@ def open_run(cfg: Config) -> tuple[Config, Path, dict | None]:
     check_env_settings(cfg)
     check_shared_memory(cfg)
     check_saved_replay(cfg)
+    check_demos(cfg)
     cfg = cfg.with_run_dir()
     run_dir = Path(cfg.run_dir)
     if state is None:
@@ -94,6 +108,7 @@ def report(summary) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    from dqn_mine.demos import DemoError
     from dqn_mine.system.runner import Run
 
     try:
@@ -104,6 +119,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_BAD_INPUT
     try:
         summary = Run(cfg, run_dir, state, serial=cfg.serial, progress=cfg.progress).execute()
+    except DemoError as exc:   # the expert could not make them: nothing was trained
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     except KeyboardInterrupt:  # a second Ctrl-C during the shutdown itself
         print(f"\n{PROG}: stopped at once by a second SIGINT during the shutdown; resume from "
               f"the last checkpoint with: python -m {PROG} --resume {run_dir}", file=sys.stderr)

@@ -83,7 +83,7 @@ def test_td_loss_is_weighted_huber_by_hand():
     rets, weights = [4.5, 1.0, 0.5], [1.0, 0.5, 0.25]
     batch = batch_to_device(table_batch([2, 2, 2], [0, 1, 2], rets, [0, 0, 0], [0, 0, 0],
                                         weights), "cpu")
-    loss, td_abs, q_taken = td_loss(online, target, batch)
+    loss, td_abs, q_taken, _ = td_loss(online, target, batch)
     # deltas 0.5 (quadratic: 0.125), 2.0 (linear: 1.5), 0.0
     assert loss.item() == pytest.approx((1.0 * 0.125 + 0.5 * 1.5 + 0.25 * 0.0) / 3)
     assert td_abs.tolist() == pytest.approx([0.5, 2.0, 0.0])
@@ -147,7 +147,7 @@ def test_update_reports_pre_update_td_and_syncs_target():
     torch.manual_seed(0)
     up = DQNUpdater(DuelingQNetwork(), lr=1e-3, target_update_interval=2, max_grad_norm=10.0)
     batch = random_batch(8)
-    _, td_before, q_before = td_loss(up.online, up.target, batch_to_device(batch, "cpu"))
+    _, td_before, q_before, _ = td_loss(up.online, up.target, batch_to_device(batch, "cpu"))
     out = up.update(batch)
     assert out["td_abs"].shape == (8,) and out["td_abs"].dtype == np.float32
     assert out["td_abs"] == pytest.approx(td_before.numpy(), rel=1e-5)

@@ -62,8 +62,8 @@ def test_working_copy_computes_the_master_network():
 def test_bfloat16_targets_loss_and_gradients_match_the_float32_reference():
     ref, fast = pair(lr=1e-3)
     batch = frames_batch(64, seed=1)
-    loss32, td32, q32, tb32 = ref.backward(batch)
-    loss16, td16, q16, tb16 = fast.backward(batch)
+    loss32, td32, q32, _, tb32 = ref.backward(batch)
+    loss16, td16, q16, _, tb16 = fast.backward(batch)
     y32 = double_dqn_target(ref.online, ref.target, tb32)
     y16 = double_dqn_target(fast._work.net, fast._work_target.net, tb16)
     assert y16.dtype == torch.float32 and q16.dtype == torch.float32

@@ -38,6 +38,7 @@ class TensorBatch(NamedTuple):
     next_carrying: torch.Tensor  # float32 [B]
     weights: torch.Tensor        # float32 [B], importance-sampling weights (max 1)
     indices: np.ndarray          # int64 [B], replay slots (host side)
+    demo: torch.Tensor | None = None   # bool [B], a demonstration's transition (None: none)
 
 
 def batch_to_device(batch, device: str | torch.device) -> TensorBatch:
@@ -50,7 +51,9 @@ def batch_to_device(batch, device: str | torch.device) -> TensorBatch:
     device = torch.device(device)
     fields = {}
     for name in TensorBatch._fields:
-        value = getattr(batch, name)
+        value = getattr(batch, name, None)
+        if value is None:
+            continue
         if name == "indices":
             fields[name] = np.asarray(value)
             continue
@@ -93,14 +96,31 @@ def double_dqn_target(online: nn.Module, target: nn.Module, batch: TensorBatch) 
     return batch.ret + batch.discount * bootstrap  # [B]
 
 
-def td_loss(online: nn.Module, target: nn.Module,
-            batch: TensorBatch) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """IS-weighted Huber loss -> (loss scalar, |TD error| [B] detached, Q(s, a) [B] detached)."""
+def margin_loss(q: torch.Tensor, action: torch.Tensor, margin: float) -> torch.Tensor:
+    """DQfD's large-margin loss per sample: max_a [Q(s, a) + l(a_E, a)] - Q(s, a_E), with
+    l = ``margin`` for every action but the demonstrated a_E, 0 for it. Zero once a_E beats
+    every other action by the margin. ``q`` [B, A], ``action`` [B] -> [B]."""
+    taken = action.long().unsqueeze(1)                                  # [B, 1]
+    bonus = torch.full_like(q, margin).scatter_(1, taken, 0.0)          # [B, A]
+    return (q + bonus).max(dim=1).values - q.gather(1, taken).squeeze(1)
+
+
+def td_loss(online: nn.Module, target: nn.Module, batch: TensorBatch,
+            demo_margin: float = 0.8, demo_weight: float = 0.0):
+    """IS-weighted Huber loss, plus ``demo_weight`` x the margin loss on the batch's
+    demonstrations -> (loss scalar, |TD error| [B] detached, Q(s, a) [B] detached, margin loss
+    summed over the demonstrations, detached scalar)."""
     y = double_dqn_target(online, target, batch)  # [B]
-    q_taken = q_of(online, batch).gather(1, batch.action.long().unsqueeze(1)).squeeze(1)  # [B]
+    q = q_of(online, batch)  # [B, A]
+    q_taken = q.gather(1, batch.action.long().unsqueeze(1)).squeeze(1)  # [B]
     per_sample = F.smooth_l1_loss(q_taken, y, reduction="none")  # [B]
+    margin_sum = torch.zeros((), device=q.device)
+    if batch.demo is not None and demo_weight:
+        supervised = margin_loss(q.float(), batch.action, demo_margin) * batch.demo  # [B]
+        per_sample = per_sample + demo_weight * supervised
+        margin_sum = supervised.detach().sum()
     loss = (batch.weights * per_sample).mean()
-    return loss, (y - q_taken).detach().abs(), q_taken.detach()
+    return loss, (y - q_taken).detach().abs(), q_taken.detach(), margin_sum
 
 
 # -- exploration -------------------------------------------------------------------------------
@@ -147,7 +167,8 @@ class DQNUpdater:
 
     def __init__(self, net: nn.Module, lr: float = 3e-5, target_update_interval: int = 2500,
                  device: str | torch.device = "cpu",
-                 max_grad_norm: float | None = None, precision: str = "float32"):
+                 max_grad_norm: float | None = None, precision: str = "float32",
+                 demo_margin: float = 0.8, demo_weight: float = 0.0):
         if precision not in PRECISIONS:
             raise ValueError(f"precision must be one of {PRECISIONS}, not {precision!r}")
         self.device = torch.device(device)
@@ -160,6 +181,7 @@ class DQNUpdater:
                                           **({"fused": True} if lowered else {}))
         self.target_update_interval = target_update_interval
         self.max_grad_norm = max_grad_norm
+        self.demo_margin, self.demo_weight = demo_margin, demo_weight
         self.updates = 0
         self._work = self._work_target = None
         if lowered:
@@ -170,10 +192,11 @@ class DQNUpdater:
         """One gradient step on ``batch`` (numpy ``Batch`` or :class:`TensorBatch`).
 
         Returns ``loss``, ``mean_q``, ``sampled_reward`` (mean n-step return of the batch) as
-        floats, ``grad_norm`` (float, nan when not clipping) and ``td_abs`` (numpy float32 [B]) for
-        priority feedback. One device-to-host transfer per update.
+        floats, ``grad_norm`` (float, nan when not clipping), ``demo_share`` (the batch's share
+        of demonstrations), ``margin_loss`` (its mean over them, nan without any) and ``td_abs``
+        (numpy float32 [B]) for priority feedback. One device-to-host transfer per update.
         """
-        loss, td_abs, q_taken, batch = self.backward(batch)
+        loss, td_abs, q_taken, margin_sum, batch = self.backward(batch)
         grad_norm = torch.full((), float("nan"), device=self.device)
         if self.max_grad_norm:
             grad_norm = nn.utils.clip_grad_norm_(self.online.parameters(), self.max_grad_norm)
@@ -183,17 +206,22 @@ class DQNUpdater:
         self.updates += 1
         if self.updates % self.target_update_interval == 0:
             self.sync_target()
+        demos = batch.demo.sum() if batch.demo is not None else torch.zeros((), device=loss.device)
         stats = torch.stack([loss.detach(), q_taken.mean(), batch.ret.mean(),
-                             grad_norm.detach().float()])  # [4]
-        host = torch.cat([stats, td_abs.float()]).cpu().numpy()  # [4 + B], one transfer
+                             grad_norm.detach().float(), demos.float(), margin_sum])  # [6]
+        host = torch.cat([stats, td_abs.float()]).cpu().numpy()  # [6 + B], one transfer
+        count = float(host[4])
         return {"loss": float(host[0]), "mean_q": float(host[1]),
                 "sampled_reward": float(host[2]), "grad_norm": float(host[3]),
-                "td_abs": host[4:].astype(np.float32)}
+                "demo_share": count / len(td_abs),
+                "margin_loss": float(host[5]) / count if count else float("nan"),
+                "td_abs": host[6:].astype(np.float32)}
 
     def backward(self, batch):
         """Loss and gradients of ``batch`` on the master (``online``) parameters, no step.
 
-        Returns (loss, |TD error| [B], Q(s, a) [B], the batch as tensors).
+        Returns (loss, |TD error| [B], Q(s, a) [B], the margin loss summed over the batch's
+        demonstrations, the batch as tensors).
         """
         if not isinstance(batch, TensorBatch):
             batch = batch_to_device(batch, self.device)
@@ -203,14 +231,15 @@ class DQNUpdater:
             # converted once here instead of once per forward pass (s' is read twice)
             batch = batch._replace(obs=batch.obs.to(torch.bfloat16),
                                    next_obs=batch.next_obs.to(torch.bfloat16))
-        loss, td_abs, q_taken = td_loss(online, target, batch)
+        loss, td_abs, q_taken, margin_sum = td_loss(online, target, batch, self.demo_margin,
+                                                    self.demo_weight)
         # the network the loss went through; in bfloat16 the masters' gradients are then
         # replaced wholesale by push_gradients
         online.zero_grad(set_to_none=True)
         loss.backward()
         if self._work is not None:
             self._work.push_gradients()
-        return loss, td_abs, q_taken, batch
+        return loss, td_abs, q_taken, margin_sum, batch
 
     def sync_target(self) -> None:
         self.target.load_state_dict(self.online.state_dict())

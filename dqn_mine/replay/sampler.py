@@ -33,6 +33,7 @@ class Batch(NamedTuple):
     indices: np.ndarray        # int64 [B]            slots, for update_priorities
     # int64 [B] frame number each sampled slot held, for update_priorities (None: not recorded)
     stamps: np.ndarray | None = None
+    demo: np.ndarray | None = None   # bool [B]: a demonstration's transition (None: not recorded)
 
     @staticmethod
     def empty(layout, batch_size: int) -> Batch:
@@ -43,7 +44,7 @@ class Batch(NamedTuple):
                      np.empty(b, np.float32), np.empty(b, np.int64), np.empty(b, np.float32),
                      np.empty(b, np.float32), np.empty(obs_shape, np.uint8),
                      np.empty((b, h), np.int8), np.empty(b, np.float32), np.empty(b, np.float32),
-                     np.empty(b, np.int64), np.empty(b, np.int64))
+                     np.empty(b, np.int64), np.empty(b, np.int64), np.empty(b, bool))
 
 
 def beta_at(update: int, total_updates: int, beta0: float) -> float:
@@ -58,14 +59,17 @@ class PrioritizedReplay:
 
     ``init_priority="actor"`` takes each new transition's priority from its writer (Ape-X);
     ``"max"`` gives it the largest priority seen so far. ``zeta=0`` is uniform replay.
+    Demonstrations (the layout's last ``demo_streams``) get ``demo_bonus`` added to their
+    priority, as DQfD's epsilon_d, so they keep being sampled once learned.
     """
 
     def __init__(self, storage: ReplayStorage, zeta: float = 0.6, eta: float = 1e-5,
-                 seed: int | None = 0, init_priority: str = "actor"):
+                 seed: int | None = 0, init_priority: str = "actor", demo_bonus: float = 0.0):
         if init_priority not in ("actor", "max"):
             raise ValueError("init_priority must be 'actor' or 'max'")
         self.storage, self.zeta, self.eta = storage, float(zeta), float(eta)
         self.init_priority = init_priority
+        self.demo_from, self.demo_bonus = storage.layout.demo_from, float(demo_bonus)
         self.rng = np.random.default_rng(seed)
         self.sum_tree = SumTree(storage.capacity)
         self.min_tree = MinTree(storage.capacity)
@@ -197,6 +201,8 @@ class PrioritizedReplay:
         s.discount.take(idx, out=out.discount, mode="clip")
         out.action[:] = s.action.take(idx)
         out.indices[:] = idx
+        if out.demo is not None:
+            np.greater_equal(idx, self.demo_from, out=out.demo)
         if out.stamps is not None:
             out.stamps[:] = self.frame_numbers(idx)
         # w_i = (N P_i)^-beta / max_j (N P_j)^-beta = (p_i / p_min)^-beta
@@ -265,6 +271,8 @@ class PrioritizedReplay:
         p = np.abs(np.asarray(td_abs, dtype=np.float64)).ravel()
         if p.size:
             p += self.eta
+            if self.demo_bonus:
+                p[idx >= self.demo_from] += self.demo_bonus
             top = float(p.max())
             if not np.isfinite(top):          # NaN/inf would poison every later sample
                 raise ValueError("update_priorities: TD errors must be finite")

@@ -58,11 +58,19 @@ def save(path, storage: ReplayStorage, replay) -> Path:
     return path
 
 
+def demo_streams(path) -> int:
+    """Demonstration rings of the replay saved at ``path`` (SnapshotError if unreadable)."""
+    layout = _info(path).get("layout")
+    return int(layout.get("demo_streams", 0)) if isinstance(layout, dict) else 0
+
+
 def check(path, layout: ReplayLayout) -> dict:
     """Raise SnapshotError unless ``path`` holds a snapshot written for ``layout``; returns its
     ``replay.json``."""
     info = _info(path)
     saved = info.get("layout")
+    if isinstance(saved, dict):   # saved before replays held demonstrations
+        saved = {"demo_streams": 0, **saved}
     if saved != _layout_dict(layout):
         diff = sorted(k for k in _layout_dict(layout)
                       if not isinstance(saved, dict) or saved.get(k) != _layout_dict(layout)[k])

@@ -51,12 +51,15 @@ class ReplayLayout:
     gamma: float = 0.99                            # discount per step
     frame_stack: int = 1                           # f: frames stacked into an observation
     num_actions: int = NUM_ACTIONS                 # size of the Q vector an actor supplies
+    demo_streams: int = 0                          # the last streams: demonstrations, written once
 
     def __post_init__(self):
         if not 1 <= self.n_step <= 254:
             raise ValueError("n_step must be in [1, 254]")
         if self.num_streams < 1 or self.frame_stack < 1 or self.history_len < 0:
             raise ValueError("num_streams, frame_stack must be >= 1 and history_len >= 0")
+        if not 0 <= self.demo_streams < self.num_streams:
+            raise ValueError("demo_streams must be in [0, num_streams)")
         if self.stream_capacity < self.n_step + self.frame_stack + 1:
             raise ValueError(f"stream_capacity {self.stream_capacity} is too small for "
                              f"n_step {self.n_step} and frame_stack {self.frame_stack}")
@@ -69,6 +72,11 @@ class ReplayLayout:
     @property
     def capacity(self) -> int:
         return self.num_streams * self.stream_capacity
+
+    @property
+    def demo_from(self) -> int:
+        """First slot of the demonstrations (``capacity`` when there are none)."""
+        return (self.num_streams - self.demo_streams) * self.stream_capacity
 
     def block_specs(self) -> list[BlockSpec]:
         """Every shared array of the replay (``SharedBlocks.create`` allocates them)."""

@@ -17,7 +17,8 @@ def attach_views(cfg: Config, handle: tuple):
     from dqn_mine.system.weights import WeightBroadcast
 
     blocks = SharedBlocks.attach(handle)
-    return blocks, ReplayStorage(replay_layout(cfg), blocks), Control(blocks), \
+    demo_streams = blocks["counters"].shape[0] - cfg.num_streams   # rings beyond the actors'
+    return blocks, ReplayStorage(replay_layout(cfg, demo_streams), blocks), Control(blocks), \
         WeightBroadcast(blocks)
 
 
@@ -25,7 +26,7 @@ class RunContext:
     """The runner's parts. Created with the shared memory and its views; :meth:`start` adds the
     learner and the actors; :meth:`stop` and :meth:`close` take them down again."""
 
-    def __init__(self, cfg: Config):
+    def __init__(self, cfg: Config, demo_streams: int = 0):
         from dqn_mine.agent.network import DuelingQNetwork
         from dqn_mine.replay import ReplayStorage
         from dqn_mine.shared import SharedBlocks
@@ -37,19 +38,17 @@ class RunContext:
         # What this process runs with: a restored replay sets the pre-fill to 0.
         self.cfg = cfg
         template = DuelingQNetwork(**network_shape(cfg))
-        self.blocks = SharedBlocks.create(run_block_specs(cfg, template))
+        self.blocks = SharedBlocks.create(run_block_specs(cfg, template, demo_streams))
         self.control = Control(self.blocks)
-        self.storage = ReplayStorage(replay_layout(cfg), self.blocks)
+        self.storage = ReplayStorage(replay_layout(cfg, demo_streams), self.blocks)
         self.weights = WeightBroadcast(self.blocks)
         self.learner: Learner | None = None
         self.actors: ProcessActors | InlineActors | None = None
 
-    def start(self, state: dict | None, replay_snapshot: str | None, generation: int,
-              serial: bool) -> None:
-        """The learner (restored from ``state`` and ``replay_snapshot`` when given), its first
-        weights broadcast, then the actors, which start from them."""
+    def start_learner(self, state: dict | None, replay_snapshot: str | None,
+                      serial: bool) -> None:
+        """The learner, restored from ``state`` and ``replay_snapshot`` when given."""
         from dqn_mine.system.learner import Learner
-        from dqn_mine.system.pool import InlineActors, ProcessActors
 
         self.learner = Learner(self.cfg, self.storage, self.control, self.weights,
                                resolve_device(self.cfg.device), threaded=not serial,
@@ -60,6 +59,11 @@ class RunContext:
             self.cfg = dataclasses.replace(self.cfg, prefill=0)
         if state:
             self.learner.load_state(state)
+
+    def start_actors(self, generation: int, serial: bool) -> None:
+        """The learner's weights broadcast, then the actors, which start from them."""
+        from dqn_mine.system.pool import InlineActors, ProcessActors
+
         self.learner.publish()
         self.actors = (
             InlineActors(self.cfg, self.storage, self.control, self.weights, generation)

@@ -95,12 +95,16 @@ class Learner:
 
         self.cfg, self.control, self.weights, self.device = cfg, control, weights, device
         net = DuelingQNetwork(**network_shape(cfg))
+        demos = storage.layout.demo_streams > 0
         self.updater = DQNUpdater(net, lr=cfg.lr, target_update_interval=cfg.target_update_interval,
                                   device=device, max_grad_norm=cfg.max_grad_norm,
                                   precision=resolve_learner_precision(cfg.learner_precision,
-                                                                      device))
+                                                                      device),
+                                  demo_margin=cfg.demo_margin,
+                                  demo_weight=cfg.demo_loss_weight if demos else 0.0)
         self.replay = PrioritizedReplay(storage, zeta=cfg.zeta if cfg.per else 0.0, eta=cfg.eta,
-                                        seed=cfg.seed, init_priority=cfg.init_priority)
+                                        seed=cfg.seed, init_priority=cfg.init_priority,
+                                        demo_bonus=cfg.demo_bonus if demos else 0.0)
         self.restored = 0
         if replay_snapshot is not None:
             from dqn_mine.replay import snapshot
@@ -148,6 +152,18 @@ class Learner:
 
     def step(self) -> dict | None:
         """One network update; None if no batch was ready."""
+        stats = self.pretrain_step()
+        if stats is None:
+            return None
+        self.updates += 1
+        self.control.updates = self.updates
+        if self.updates % self.cfg.publish_interval == 0:
+            self.publish()
+        return stats
+
+    def pretrain_step(self) -> dict | None:
+        """One network update that the run's update count leaves out (``--demo-pretrain``: on
+        the demonstrations, before the actors start); None if no batch was ready."""
         item = self.source.get()
         if item is None:
             return None
@@ -155,10 +171,6 @@ class Learner:
         stats = self.updater.update(device_batch)
         # queued, thread-safe; the stamps keep it off slots refilled since the sample
         self.replay.update_priorities(batch.indices, stats["td_abs"], batch.stamps)
-        self.updates += 1
-        self.control.updates = self.updates
-        if self.updates % self.cfg.publish_interval == 0:
-            self.publish()
         stats["td_abs"] = float(np.mean(stats["td_abs"]))
         return stats
 

@@ -19,12 +19,14 @@ from pathlib import Path
 
 from dqn_mine import checkpoint as ckpt
 from dqn_mine.config import Config, learner_threads, target_update_interval
+from dqn_mine.demos import DemoSet
 from dqn_mine.exitcodes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from dqn_mine.metrics import MetricsTable, RateMeter, progress_postfix
-from dqn_mine.replay.snapshot import SnapshotError
+from dqn_mine.replay.snapshot import SnapshotError, demo_streams
 from dqn_mine.system.context import RunContext
 from dqn_mine.system.curriculum import Curriculum
 from dqn_mine.system.episodes import EpisodeStats
+from dqn_mine.system.layout import run_demos
 from dqn_mine.system.pacing import learner_may_update, prefill_target
 from dqn_mine.system.pool import ActorFailure
 
@@ -96,7 +98,13 @@ class StopSignals:
 
 
 # Sums over the log interval of what each update reports.
-UPDATE_STATS = ("loss", "mean_q", "td_abs", "sampled_reward")
+UPDATE_STATS = ("loss", "mean_q", "td_abs", "sampled_reward", "demo_share", "margin_loss")
+
+
+def _mean(values: list) -> float:
+    """Mean of the numbers that are not NaN (a batch without demonstrations has no margin)."""
+    kept = [v for v in values if v == v]
+    return sum(kept) / len(kept) if kept else math.nan
 
 
 class Run:
@@ -170,15 +178,21 @@ class Run:
         import torch
 
         torch.set_num_threads(learner_threads(self.cfg))
-        self.ctx = RunContext(self.cfg)
+        snapshot = self.replay_to_restore()
+        # a saved replay holds its demonstrations already
+        demos = None if snapshot else run_demos(self.cfg, self.progress)
+        self.ctx = RunContext(self.cfg, demo_streams(snapshot) if snapshot else
+                              demos.streams if demos else 0)
         code = EXIT_OK
         try:
             with self.signals:
                 torch.manual_seed(self.cfg.seed)
                 self.ctx.control.show_curriculum(self.curriculum)
-                self.ctx.start(self.state, self.replay_to_restore(), self.generation,
-                               self.serial)
+                self.ctx.start_learner(self.state, snapshot, self.serial)
                 self.cfg = self.ctx.cfg
+                if demos is not None:
+                    self.add_demos(demos)
+                self.ctx.start_actors(self.generation, self.serial)
                 self.prefill_and_train()
                 if self.signals.received:
                     code, self.reason = EXIT_INTERRUPTED, f"stopped by {self.signals.received}"
@@ -206,6 +220,35 @@ class Run:
         if self.cfg.resume and self.cfg.save_replay and path is None:
             print(f"no saved replay in {self.cfg.save_replay}: pre-filling anew", flush=True)
         return path
+
+    def add_demos(self, demos: DemoSet) -> None:
+        """The demonstrations into the replay; a fresh run then pre-trains on them alone."""
+        demos.write(self.ctx.storage, self.progress)
+        print(f"{len(demos.lengths):,} demonstrations from {demos.source} ({demos.steps:,} "
+              f"steps) are in the replay", flush=True)
+        if self.state is None and self.cfg.demo_pretrain:
+            self.pretrain()
+
+    def pretrain(self) -> None:
+        """``--demo-pretrain`` updates on the demonstrations, before any actor acts (they are
+        not counted as the run's updates: the budget and the replay ratio are the actors')."""
+        total, learner = self.cfg.demo_pretrain, self.ctx.learner
+        bar = self._bar(total=total, desc="demo pre-train", unit="upd")
+        done, last = 0, {}
+        while done < total and not self._should_stop():
+            stats = learner.pretrain_step()
+            if stats is None:
+                continue
+            done += 1
+            bar.update(1)
+            last = stats
+            if done % 100 == 0:
+                bar.set_postfix(loss=f"{stats['loss']:.3g}", margin=f"{stats['margin_loss']:.3g}",
+                                refresh=False)
+        bar.close()
+        if last:
+            print(f"pre-trained on the demonstrations for {done:,} updates: loss "
+                  f"{last['loss']:.4f}, margin loss {last['margin_loss']:.4f}", flush=True)
 
     def prefill_and_train(self) -> None:
         self.metrics = MetricsTable(
@@ -302,7 +345,7 @@ class Run:
                "phase_low_eps_return": self.curriculum.phase_low_eps_return,
                "target_sync": learner.updater.target_update_interval,
                "rewarded_episodes": stats.rewarded}
-        row.update({k: (sum(v) / len(v) if v else math.nan) for k, v in agg.items()})
+        row.update({k: _mean(v) for k, v in agg.items()})
         self.metrics.write(row)
         return row
 
