@@ -14,7 +14,6 @@ from dqn_mine.agent.learning import (
     batch_to_device,
     double_dqn_target,
     epsilon_for_actor,
-    epsilon_greedy,
     nstep_return,
     td_loss,
 )
@@ -105,18 +104,6 @@ def test_apex_epsilons():
     assert epsilon_for_actor(3, 8) == pytest.approx(0.4 ** 4)
     assert epsilon_for_actor(7, 8) == pytest.approx(0.4 ** 8)
     assert epsilon_for_actor(1, 2, base=0.5, alpha=1) == pytest.approx(0.25)
-
-
-def test_epsilon_greedy():
-    rng = np.random.default_rng(0)
-    q = np.tile(np.array([[0.0, 3.0, 1.0, 0.0, 0.0, 0.0]]), (6000, 1))
-    assert (epsilon_greedy(q, 0.0, rng) == 1).all()
-    counts = np.bincount(epsilon_greedy(torch.tensor(q), 1.0, rng), minlength=6)
-    assert counts.min() > 850 and counts.max() < 1150  # uniform: 1000 each
-    eps = np.where(np.arange(6000) < 3000, 0.0, 1.0)  # one epsilon per row
-    actions = epsilon_greedy(q, eps, rng)
-    assert (actions[:3000] == 1).all() and (actions[3000:] != 1).sum() > 2000
-    assert actions.dtype == np.int64
 
 
 # -- updater -----------------------------------------------------------------------------------

@@ -297,14 +297,14 @@ def test_evaluation_actor_runs_the_full_target_task():
     specs = actor_specs(cfg)
     evaluator = specs[-1]
     assert len(specs) == cfg.actors + 1 and evaluator.streams == ()
-    assert not evaluator.follows_curriculum
+    assert evaluator.evaluates and not any(s.evaluates for s in specs[:-1])
     assert evaluator.env_kwargs["placement"] == "fixed" and evaluator.env_kwargs["task"] == \
         "three-room"
     assert not evaluator.env_kwargs["randomise_visuals"]
     assert all(s.env_kwargs["randomise_visuals"] for s in specs[:-1])
     adaptive = parse_args(["--task", "three-room", "--curriculum", "adaptive",
                            "--eval-every", "1000"])
-    assert Curriculum(adaptive).phase == 6 and not actor_specs(adaptive)[-1].follows_curriculum
+    assert Curriculum(adaptive).phase == 6 and actor_specs(adaptive)[-1].evaluates
     two = parse_args(["--curriculum", "adaptive", "--eval-every", "1000"])   # two-room
     assert Curriculum(two).phase == 6 and eval_env_kwargs(two)["task"] == "two-room"
     rooms = parse_args(["--task", "rooms", "--curriculum", "schedule", "--rooms-schedule", "3", "4",

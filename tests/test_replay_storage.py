@@ -255,3 +255,19 @@ def test_layout_sizes_and_lazy_frames():
     with pytest.raises(ValueError):
         ReplayLayout(num_streams=1, stream_capacity=4, n_step=6)
     assert ReplayLayout.from_capacity(2 ** 20, 7, n_step=3).stream_capacity == 2 ** 20 // 7
+
+
+@pytest.mark.parametrize("end", ["term", "trunc"])
+def test_writer_matches_the_reference_nstep_return(make_storage, end):
+    """Every stored window against ``learning.nstep_return``, the rule written down once."""
+    from dqn_mine.agent.learning import nstep_return
+
+    s = make_storage(n_step=4)
+    w = NStepWriter(s, 0, eta=0.0, flush_every=3)
+    rewards = list(np.random.default_rng(1).integers(0, 3, 11).astype(float))
+    play(w, 0, 0, rewards, end=end, next_q=np.zeros(6, np.float32))
+    for t in range(len(rewards)):
+        window = rewards[t:t + 4]
+        stop = len(window) - 1 if end == "term" and t + len(window) == len(rewards) else None
+        ret, discount = nstep_return(window, GAMMA, terminated_at=stop)
+        assert s.ret[t] == pytest.approx(ret) and s.discount[t] == pytest.approx(discount)

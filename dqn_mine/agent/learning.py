@@ -1,6 +1,6 @@
-"""The learning maths: n-step double-DQN targets, the IS-weighted Huber loss, the epsilon-greedy
-policy and one Adam update (:class:`DQNUpdater`, float32 or bfloat16 compute). Pure functions of
-tensors: the processes around them (actors, learner loop) live in ``dqn_mine.system``.
+"""The learning maths: n-step double-DQN targets, the IS-weighted Huber loss, DQfD's margin
+loss, the Ape-X exploration rates and one Adam update (:class:`DQNUpdater`, float32 or bfloat16
+compute). Pure functions of tensors: the processes around them live in ``dqn_mine.system``.
 
 A batch carries a per-sample ``discount``: gamma**k when the n-step window ended after k steps
 without termination (k = n, or fewer when the episode was truncated: a time limit still
@@ -130,19 +130,6 @@ def epsilon_for_actor(i: int, n: int, base: float = 0.4, alpha: float = 7.0) -> 
     if n <= 1:
         return base
     return base ** (1.0 + alpha * i / (n - 1))
-
-
-def epsilon_greedy(q_values, eps, rng: np.random.Generator) -> np.ndarray:
-    """Greedy actions of ``q_values`` [B, A], each replaced by a uniform one with prob. ``eps``.
-
-    ``eps`` is a scalar or one value per row; returns int64 [B].
-    """
-    q = q_values.detach().cpu().numpy() if isinstance(q_values, torch.Tensor) else \
-        np.asarray(q_values)
-    actions = q.argmax(axis=1).astype(np.int64)  # [B]
-    explore = rng.random(len(actions)) < np.asarray(eps)  # [B]
-    actions[explore] = rng.integers(0, q.shape[1], int(explore.sum()))
-    return actions
 
 
 PRECISIONS = ("float32", "bfloat16")

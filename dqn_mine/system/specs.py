@@ -23,7 +23,6 @@ class ActorSpec:
     seed: int
     env_kwargs: dict
     num_envs: int = 1
-    follows_curriculum: bool = True
 
     @property
     def evaluates(self) -> bool:
@@ -77,7 +76,7 @@ def actor_specs(cfg: Config, generation: int = 0) -> list[ActorSpec]:
     if cfg.eval_every:
         specs.append(ActorSpec(index=cfg.actors, streams=(), epsilon=cfg.eval_epsilon,
                                seed=actor_seed(cfg.seed, 7000 + cfg.actors, generation),
-                               env_kwargs=eval_env_kwargs(cfg), follows_curriculum=False))
+                               env_kwargs=eval_env_kwargs(cfg)))
     return specs
 
 
