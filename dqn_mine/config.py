@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 from dqn_mine.env.mine import MAX_CAMERA_PITCH
-from dqn_mine.env.tasks import MAX_ROOMS, PLACEMENTS, TASKS
+from dqn_mine.env.tasks import DEFAULT_NUM_ROOMS, MAX_ROOMS, PLACEMENTS, TASKS
 from dqn_mine.replay.writer import FLUSH_EVERY
 
 DEVICES = ("auto", "cpu", "cuda")
@@ -60,7 +60,7 @@ class Config:
 
     # -- task --------------------------------------------------------------------------------
     task: str = _f("two-room", "task to train on", TASKS)
-    num_rooms: int = _f(3, "number of rooms of the `rooms` task")
+    num_rooms: int = _f(DEFAULT_NUM_ROOMS, "number of rooms of the `rooms` task")
     room_size: float = _f(16.0, "side length of a room in world units")
     max_episode_steps: Optional[int] = _f(None, "episode step limit (none = the task's default)")
     placement: str = _f("fixed", "where agent, kit and miner start (any-room = domain "
