@@ -257,3 +257,13 @@ def test_manual_recording_from_scripted_key_presses(tmp_path):
     assert first.terminated and np.array_equal(first.actions, expert.actions)
     assert np.array_equal(first.frames, expert.frames)
     assert not second.terminated and second.actions.tolist() == [0, 0] and second.seed == 4
+
+
+def test_too_few_demonstrations_for_a_batch_skip_the_pretraining(tmp_path):
+    from tests.test_train import TINY, run_train
+
+    res = run_train(*TINY, "--serial", "--updates", "20", "--demos", "1", "--demo-pretrain",
+                    "50", "--batch-size", "128", "--replay-capacity", "8192",
+                    "--run-dir", str(tmp_path / "run"))
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "no pre-training:" in res.stdout and "do not fill a batch of 128" in res.stdout

@@ -227,6 +227,10 @@ class Run:
         print(f"{len(demos.lengths):,} demonstrations from {demos.source} ({demos.steps:,} "
               f"steps) are in the replay", flush=True)
         if self.state is None and self.cfg.demo_pretrain:
+            if demos.steps < self.cfg.batch_size:   # no batch could ever be sampled
+                print(f"no pre-training: {demos.steps} demonstration steps do not fill a batch "
+                      f"of {self.cfg.batch_size}", flush=True)
+                return
             self.pretrain()
 
     def pretrain(self) -> None:
