@@ -64,12 +64,11 @@ def check_saved_replay(cfg: Config) -> None:
 def check_demos(cfg: Config) -> None:
     """A --demos-from folder must hold readable episodes that fit the replay's rings."""
     from dqn_mine.demos import DemoError, episode_files, pack, read_lengths
-    from dqn_mine.system.layout import replay_layout
+    from dqn_mine.system.layout import demo_ring_frames
 
     if cfg.demos_from:
         try:
-            pack(read_lengths(episode_files(cfg.demos_from)),
-                 replay_layout(cfg).stream_capacity - cfg.frame_stack + 1)
+            pack(read_lengths(episode_files(cfg.demos_from)), demo_ring_frames(cfg))
         except DemoError as exc:
             raise ConfigError(f"--demos-from: {exc}") from None
 

@@ -25,11 +25,16 @@ def run_block_specs(cfg: Config, net, demo_streams: int = 0) -> list[BlockSpec]:
             + Control.specs(cfg.acting_processes) + WeightBroadcast.specs(net))
 
 
+def demo_ring_frames(cfg: Config) -> int:
+    """Frames a demonstration ring holds without ever overwriting one (stacking looks back)."""
+    return replay_layout(cfg).stream_capacity - (cfg.frame_stack - 1)
+
+
 def run_demos(cfg: Config, progress: bool = False):
     """The demonstrations ``cfg`` asks for (``dqn_mine.demos.DemoSet``), None without any."""
     from dqn_mine.demos import DemoSet
 
-    frames = replay_layout(cfg).stream_capacity - (cfg.frame_stack - 1)
+    frames = demo_ring_frames(cfg)
     if cfg.demos_from:
         return DemoSet.from_folder(cfg.demos_from, frames)
     if not cfg.demos:
