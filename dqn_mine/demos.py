@@ -125,10 +125,9 @@ def save_episode(folder, index: int, episode: DemoEpisode) -> Path:
     return path
 
 
-def write_meta(folder, paths: list[Path], env_settings: dict) -> None:
+def write_meta(folder, episodes: int, steps: int, env_settings: dict) -> None:
     """``demos.json``: the format, the episode and step counts, the environment's settings."""
-    meta = {"format": FORMAT, "episodes": len(paths), "steps": sum(read_lengths(paths)),
-            "env": env_settings}
+    meta = {"format": FORMAT, "episodes": episodes, "steps": steps, "env": env_settings}
     (Path(folder) / META).write_text(json.dumps(meta, indent=1) + "\n")
 
 

@@ -252,7 +252,7 @@ def record_demos(env, policy: Policy, args: argparse.Namespace) -> int:
     from dqn_mine import demos
 
     folder = Path(args.record)
-    paths, delivered = [], 0
+    paths, delivered, steps = [], 0, 0
     act = policy if args.manual else lambda env, obs, info, t: policy(env, obs, info)
     for i in tqdm(range(args.episodes), desc="recording", unit="ep",
                   disable=args.quiet or args.manual):
@@ -261,10 +261,11 @@ def record_demos(env, policy: Policy, args: argparse.Namespace) -> int:
             continue
         paths.append(demos.save_episode(folder, len(paths), ep))
         delivered += ep.terminated
+        steps += ep.steps
     if not paths:
         print("no episode was recorded", file=sys.stderr)
         return EXIT_BAD_INPUT
-    demos.write_meta(folder, paths, {key: getattr(args, key) for key in ENV_DEFAULTS})
+    demos.write_meta(folder, len(paths), steps, {key: getattr(args, key) for key in ENV_DEFAULTS})
     print(f"{args.policy} on {args.task}: {len(paths)} episodes (seeds from {args.seed}), "
           f"{delivered} delivered -> {folder}")
     return 0
