@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from dqn_mine.config import NETWORK_SHAPE
+from dqn_mine.config import NETWORK_SHAPE, Config, ConfigError
 
 FILENAME = "checkpoint.pt"
 FORMAT = 1
@@ -24,7 +24,7 @@ def save(run_dir: Path, updater_state: dict, counters: dict, cfg) -> Path:
     path = Path(run_dir) / FILENAME
     tmp = path.with_suffix(".pt.tmp")
     torch.save({"format": FORMAT, "updater": updater_state, "counters": dict(counters),
-                "config": cfg.to_dict()}, tmp)
+                "config": cfg.saved_dict()}, tmp)
     os.replace(tmp, path)
     return path
 
@@ -48,4 +48,8 @@ def load(path: Path, map_location: str = "cpu") -> dict:
             or not isinstance(state.get("config"), dict) \
             or not set(NETWORK_SHAPE) <= set(state["config"]):
         raise CheckpointError(f"{path} is not a dqn_mine checkpoint")
+    try:   # every reader sees this version's settings, an older run's migrated
+        state["config"] = Config.from_dict(state["config"], where=str(path)).to_dict()
+    except ConfigError as exc:
+        raise CheckpointError(str(exc)) from None
     return state

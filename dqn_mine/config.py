@@ -30,14 +30,11 @@ DEVICES = ("auto", "cpu", "cuda")
 ACTOR_PRECISIONS = ("auto", "float32", "bfloat16")
 LEARNER_PRECISIONS = ACTOR_PRECISIONS   # auto, or a dtype by name
 EPSILON_SCHEDULES = ("fixed", "apex")
-INIT_PRIORITIES = ("actor", "max")
-CURRICULA = ("none", "adaptive", "uniform", "schedule", "backward")
-PHASED_CURRICULA = ("adaptive", "uniform")   # those that start episodes in phases
+CURRICULA = ("none", "adaptive", "schedule", "backward")
+PHASED_CURRICULA = ("adaptive",)   # those that start episodes in phases
 EXPLORATIONS = ("epsilon", "ez")
 PREFILL_EXPLORERS = ("agent", "bump-and-press")
-REVIEW_PICKS = ("uniform", "nearest")
 REVIEW_UNITS = ("episodes", "steps")
-EPISODE_ORDERS = ("ended", "started")
 
 
 DIFFERENCES_KEY = "differs_from_preset"   # in config.json: what the flags changed
@@ -76,9 +73,8 @@ class Config:
                            "faced item hides it, and holding a boulder in front of another looks "
                            "like holding nothing); training and evaluation alike")
     curriculum: str = _f("none", "adaptive: phases 6->1 (three-room and two-room), one "
-                         "harder when the rolling return passes the threshold; uniform: every "
-                         "episode starts in a phase drawn uniformly, the full task included "
-                         "(no switches); schedule: room counts by share of updates; backward "
+                         "harder when the rolling return passes the threshold; schedule: room "
+                         "counts by share of updates; backward "
                          "(every task): start on the expert's solution of each episode, d "
                          "steps before its delivery, d growing by --backward-step as the agent "
                          "succeeds",
@@ -90,10 +86,6 @@ class Config:
     curriculum_review: float = _f(0.0, "adaptive and backward curricula: share of episodes that "
                                   "start in an easier phase already passed, or nearer the "
                                   "reward than the backward frontier (0 = the study's rule)")
-    curriculum_review_pick: str = _f("uniform", "which passed phase a review episode starts "
-                                     "in: uniform, or nearest (the phase k steps easier with "
-                                     "weight 2**-k: most often the one just passed)",
-                                     REVIEW_PICKS)
     curriculum_review_unit: str = _f("episodes", "what --curriculum-review and --curriculum-dr "
                                      "are shares of: episodes (a random draw per episode), or "
                                      "steps (an actor reviews while its review episodes played "
@@ -101,15 +93,6 @@ class Config:
                                      "switch, and randomises while its randomised episodes "
                                      "played fewer than that share of all its steps)",
                                      REVIEW_UNITS)
-    episode_order: str = _f("ended", "order in which a training actor reports its finished "
-                            "episodes (to the curriculum's window and the rolling returns): "
-                            "ended (as they end: right after a phase switch only the quick "
-                            "ones, mostly successes, have ended), or started (an episode is "
-                            "reported once every episode its actor started before it has "
-                            "ended)", EPISODE_ORDERS)
-    curriculum_steps: Optional[int] = _f(None, "adaptive curriculum: step limit of episodes that "
-                                         "start in a phase easier than the full task (none = "
-                                         "the task's limit)")
     curriculum_dr: float = _f(0.0, "adaptive curriculum with domain randomisation: share of "
                               "episodes that start as the full task with --placement any-room's "
                               "random rooms instead of in a phase (they do not count towards "
@@ -164,13 +147,6 @@ class Config:
     # With Huber loss and IS weights <= 1, dLoss/dQ is bounded per sample, so a norm-40 clip
     # rarely binds; it guards against rare spikes (e.g. right after a target sync) at no cost.
     target_update_interval: int = _f(2500, "updates between target network syncs (Ape-X value)")
-    target_update_early: Optional[int] = _f(None, "adaptive curriculum: target sync interval "
-                                            "while the phase is at or above "
-                                            "--target-update-early-phase (none = "
-                                            "--target-update-interval throughout)")
-    target_update_early_phase: int = _f(17, "the hardest phase that syncs every "
-                                        "--target-update-early; phases below it sync every "
-                                        "--target-update-interval")
     max_grad_norm: Optional[float] = _f(40.0, "clip the global gradient norm (none or 0 = off; "
                                         "Ape-X value)")
     publish_interval: int = _f(500, "updates between weight broadcasts to the actors")
@@ -189,12 +165,9 @@ class Config:
     frame_stack: int = _f(1, "frames stacked along channels (1 = no stacking)")
     # -- replay ------------------------------------------------------------------------------
     replay_capacity: int = _f(1_048_576, "transitions the replay holds (oldest overwritten)")
-    per: bool = _f(True, "prioritised replay (off = uniform sampling)")
     zeta: float = _f(0.6, "priority exponent: P(i) ~ p_i**zeta")
     beta0: float = _f(0.4, "initial importance-sampling exponent, annealed to 1")
     eta: float = _f(1e-5, "added to |TD error| so no priority is zero")
-    init_priority: str = _f("actor", "priority of new transitions: actor (from the actor's "
-                            "network) or max (largest so far)", INIT_PRIORITIES)
     # DQfD (Hester et al. 2018): its margin, loss weight and priority bonus are the defaults.
     demos: int = _f(0, "expert episodes played before acting and kept in the replay for the "
                     "whole run, never overwritten (DQfD demonstrations; 0 = none)")
@@ -226,7 +199,8 @@ class Config:
                                "(0 = never)")
     # -- run ---------------------------------------------------------------------------------
     seed: int = _f(0, "random seed")
-    preset: str = _f("paper", "named configuration the flags start from")
+    preset: str = _f("paper", "named configuration the flags start from (see below; why "
+                     "each setting: docs/presets.md)")
     run_dir: Optional[str] = _f(None, "run folder (none = runs/<task>__<preset>__<seed>__<time>)")
     resume: Optional[str] = _f(None, "continue the run in this folder with its saved config")
     checkpoint_interval: int = _f(50_000, "updates between checkpoints (one is always written "
@@ -279,16 +253,20 @@ class Config:
         return {name: value for name, value in self.differences().items()
                 if name not in ("run_dir", "resume")}
 
+    def saved_dict(self) -> dict[str, Any]:
+        """All settings under the format version that :func:`migrate` reads back."""
+        return {VERSION_KEY: CONFIG_VERSION, **self.to_dict()}
+
     def to_json(self, path) -> None:
         """All settings, plus (for people; ignored on load) those that differ from the preset."""
-        data = {**self.to_dict(), DIFFERENCES_KEY: self.preset_differences()}
+        data = {**self.saved_dict(), DIFFERENCES_KEY: self.preset_differences()}
         Path(path).write_text(json.dumps(data, indent=2) + "\n")
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], where: str = "config") -> Config:
         if not isinstance(data, dict):
             raise ConfigError(f"{where}: expected a json object")
-        data = {k: v for k, v in data.items() if k != DIFFERENCES_KEY}
+        data = migrate(data, where)
         hints = _hints()
         unknown = sorted(set(data) - set(hints))
         if unknown:
@@ -313,18 +291,52 @@ class Config:
             raise ConfigError(f"no config file at {path}") from None
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise ConfigError(f"corrupt config file {path}: {str(exc).splitlines()[0]}") from None
-        if isinstance(data, dict):   # saved before the setting existed: the agent pre-filled
-            data.setdefault("prefill_explorer", "agent")
         return cls.from_dict(data, where=str(path))
 
 
-# Named starting points; explicit flags override them.
+# -- saved configs of older versions -----------------------------------------------------------
+# config.json and every checkpoint carry VERSION_KEY; a config without it is version 1.
+VERSION_KEY = "config_version"
+CONFIG_VERSION = 2
+# Settings version 2 removed (measured and rejected, or used by no preset), with the value at
+# which each changed nothing. A run that used another value cannot be continued as it was.
+REMOVED_IN_2 = {"episode_order": "ended", "curriculum_steps": None, "target_update_early": None,
+                "curriculum_review_pick": "uniform", "init_priority": "actor"}
+
+
+def migrate(data: dict[str, Any], where: str = "config") -> dict[str, Any]:
+    """A saved config (``config.json`` or a checkpoint's) as this version's settings; keys it
+    lacks take :class:`Config`'s defaults later. Raises ConfigError naming the saved version
+    when the run used what this version cannot do."""
+    data = {k: v for k, v in data.items() if k != DIFFERENCES_KEY}
+    version = data.pop(VERSION_KEY, 1)
+    if version not in range(1, CONFIG_VERSION + 1):
+        raise ConfigError(f"{where}: config version {version!r} is not one this dqn_mine reads "
+                          f"(1..{CONFIG_VERSION}); a newer dqn_mine saved it?")
+    if version == 1:
+        data = _from_version_1(data, where)
+    return data
+
+
+def _from_version_1(data: dict[str, Any], where: str) -> dict[str, Any]:
+    data.setdefault("prefill_explorer", "agent")   # saved before the walker pre-filled
+    if data.pop("per", True) is False:
+        data["zeta"] = 0.0                         # uniform replay, as --per off sampled
+    data.pop("target_update_early_phase", None)    # read only with target_update_early
+    if data.get("curriculum") == "uniform":
+        raise ConfigError(f"{where}: a version 1 config with curriculum = 'uniform', which "
+                          "version 2 removed; continue it with dqn_mine before that change")
+    for name, neutral in REMOVED_IN_2.items():
+        value = data.pop(name, neutral)
+        if value != neutral:
+            raise ConfigError(f"{where}: a version 1 config with {name} = {value!r}, which "
+                              "version 2 removed; continue it with dqn_mine before that change")
+    return data
+
+
+# Named starting points; explicit flags override them. Why each setting: docs/presets.md.
 PRESETS: dict[str, dict[str, Any]] = {
-    "paper": {},  # the study's configuration on two-room
-    # Learns a small one-room on 2 CPU cores in minutes: high exploration from the Ape-X schedule
-    # (actor 0 at 0.4; a random network alone barely moves), a faster learning rate and target
-    # sync for the few updates there is time for, a small replay that fills quickly. The agent
-    # pre-fills: the small room rewards its own exploration.
+    "paper": {},
     "smoke": {
         "task": "one-room", "room_size": 8.0, "max_episode_steps": 200,
         "actors": 2, "envs_per_actor": 1, "epsilon_schedule": "apex",
@@ -332,33 +344,6 @@ PRESETS: dict[str, dict[str, Any]] = {
         "lr": 2e-4, "target_update_interval": 500, "publish_interval": 100,
         "checkpoint_interval": 5000, "log_interval": 250, "prefill_explorer": "agent",
     },
-    # The full two-room task (16 x 16 rooms, 1,000 steps) on a few-core CPU machine. Changes from
-    # the study's defaults, each for the hour there is:
-    # - 2 actors x 16 envs (one batched forward each): the fastest acting measured on 2 cores;
-    # - the Ape-X epsilons, one per environment (0.4 down to 0.0007 over 32), with ez
-    #   exploration: the exploration that reaches the most sub-goals of two-room in the explore
-    #   benchmark (it still finds no reward there; see docs/exploration.md);
-    # - pre-fill 20,000 steps per actor and a 262,144-slot replay: the hour holds ~100k updates,
-    #   not the study's 1e6, so the replay turns over in about the same number of updates;
-    # - lr 1e-4, target sync every 1,000 updates, weights every 250: fewer updates to learn in
-    #   (target sync 250 was tried on seed 1: phases 5-3 came sooner, phase 2 took 20 min
-    #   instead of 10, the full task came 4 min later; no gain shown);
-    # - the backward curriculum (no undirected exploration found the full task's reward): starts
-    #   on the expert's solution of each episode, moving back as the agent succeeds; it reached
-    #   the full task sooner than two-room's six-phase table on the same kind of VM
-    #   (docs/backward.md); the evaluation actor plays the full task every 500k steps; 30% of
-    #   the episodes start nearer the reward (review), so rewards keep flowing after a move;
-    # - the agent's own exploration pre-fills: the curriculum's first starts reward it (the
-    #   runs in the README were measured so);
-    # - a replay ratio of 0.03 updates per transition: the learner (one core, 60-80 updates/s)
-    #   is the bottleneck at any ratio from 0.03 to 0.1, so the ratio only sets the data per
-    #   update; at 0.03 (~2,000 steps/s) the actors fill the second core, at 0.05 it was 40%
-    #   idle. Seeds 0 and 1 reached the full task at 31.7 and 33.5 min (0.05: 37.1 min and
-    #   never; 0.1 was worse still). Free-running (0.007) starves the learner of its core;
-    # - unstick: a random action after a step that left the frame unchanged (a greedy policy
-    #   facing a wall otherwise repeats itself); it doubles the episodes that reach room 2. The
-    #   evaluation actor unsticks too, so it scores the policy the training actors play at
-    #   epsilon 0.01 (`python -m dqn_mine.evaluate RUN` plays so too; --no-unstick without).
     "cpu": {
         "task": "two-room", "actors": 2, "envs_per_actor": 16, "unstick": True,
         "epsilon_schedule": "apex", "exploration": "ez", "curriculum": "backward",
@@ -369,46 +354,26 @@ PRESETS: dict[str, dict[str, Any]] = {
         "log_interval": 500, "prefill_explorer": "agent",
     },
 }
-# The full three-room task (2,000 steps) on a few-core CPU machine: the cpu preset's settings,
-# with the adaptive curriculum over the twenty-three boulder phases (the study's six phases leave
-# steps where a doorway must be cleared without ever having walked up to a blocked one or
-# through a cleared one, which on two-room was the wall until such phases existed, and one where
-# the kit must be taken after only ever starting with it in hand; see dqn_mine/env/tasks.py), half
-# of the steps reviewing passed phases (with 30% of the episodes, ~4% of the steps, the skills
-# of passed phases decayed within 15 minutes of a stalled phase; docs/three_room.md) and an
-# update budget for 90 minutes at ~100 updates/s. The target sync stays at 1,000 updates: every
-# 250 brought the first phases in 40% fewer updates, then the long phase from room 1 stalled and
-# the search of room 2 decayed (docs/three_room.md). The camera looks 15 degrees down: level, a
-# kit within reach of action 4 is below the view, and the phases that take it held every run for
-# 11-17 minutes; pitched, they passed in 2-3 minutes on seeds 0 and 1 (docs/three_room.md).
-# Each room's floor has a colour of its own: room 1's two open doorways look alike otherwise,
-# and the agent that had to go on to room 2 went back to room 0 (the miner's room, where it had
-# always gone carrying the kit); with the colours the phase from room 1 took 9 and 12 minutes
-# instead of 29 and 36, seeds 0 and 1 (docs/three_room.md). Unsticking also breaks loops of two
-# frames: holding a boulder the greedy policy put it down and took it up again for the last 39
-# of 62 minutes on seed 6 (room 1 holding boulder 0-1); with --unstick-cycle 2 the same phase
-# passed in 12 minutes (docs/three_room.md). The carried item is drawn over the world: drawn
-# where it is held, a faced boulder hid the boulder in hand, action 4 there swapped the two
-# (the doorway stayed blocked) and the view was the one of an empty hand; room 1 holding
-# boulder 0-1 took 22 minutes from a checkpoint of seed 8, 5 with the item on top (the same
-# checkpoint; docs/three_room.md). The evaluation actor holds its random actions as the
-# training actors do, so that it scores the policy they play at epsilon 0.01: a checkpoint whose
-# training episodes at epsilon <= 0.01 delivered from room 1 holding boulder 0-1 in 48% scored
-# 0 of 16 from there with one-step random actions, 1 of 16 held (docs/three_room.md).
 PRESETS["cpu-three-room"] = {**PRESETS["cpu"], "task": "three-room", "curriculum": "adaptive",
                              "boulder_phases": True,
                              "curriculum_review": 0.5, "curriculum_review_unit": "steps",
                              "updates": 600_000, "camera_pitch": 15.0, "room_colours": True,
                              "unstick_cycle": 2, "held_on_top": True, "eval_held": True}
-
-# The rooms task (agent, kit and miner each in a random room, every doorway blocked, 2,000 steps)
-# at any --num-rooms on a few-core CPU machine: the cpu preset's settings (the backward
-# curriculum: no table of starts exists for N rooms) and the look that let the three-room agent
-# tell rooms and held items apart (pitched camera, room colours, the held item on top, two-frame
-# loops unstuck; docs/three_room.md).
 PRESETS["cpu-rooms"] = {**PRESETS["cpu"], "task": "rooms", "updates": 600_000,
                         "camera_pitch": 15.0, "room_colours": True, "unstick_cycle": 2,
                         "held_on_top": True, "eval_held": True}
+# What each is for, in a line or two (``--help`` lists them).
+PRESET_REASONS = {
+    "paper": "the study's configuration on two-room (a scripted walker plays the pre-fill)",
+    "smoke": "a small one-room that 2 CPU cores learn in minutes",
+    "cpu": "full two-room in an hour on a few CPU cores: 2 actors x 16 envs, Ape-X epsilons "
+           "with ez and unstick, the backward curriculum, a replay ratio of 0.03",
+    "cpu-three-room": "full three-room in 90 minutes on a few CPU cores: the 23-phase table, "
+                      "half the steps reviewing, a pitched camera, room colours, the held item "
+                      "on top",
+    "cpu-rooms": "the rooms task at any --num-rooms: cpu's settings with three-room's look",
+}
+
 
 # -- validation --------------------------------------------------------------------------------
 
@@ -425,12 +390,9 @@ def _choice_problems(c: Config) -> list[str]:
     p = []
     if c.tensorboard and importlib.util.find_spec("tensorboard") is None:
         p.append("--tensorboard needs the tensorboard package (pip install -e .[tb])")
-    for name in ("task", "placement", "curriculum", "epsilon_schedule", "init_priority",
-                 "device", "actor_precision", "learner_precision", "exploration",
-                 "prefill_explorer",
-                 "curriculum_review_pick", "curriculum_review_unit", "episode_order"):
-        choices = _field(name).metadata["choices"]
-        if getattr(c, name) not in choices:
+    for name, f in Config.__dataclass_fields__.items():
+        choices = f.metadata.get("choices")
+        if choices is not None and getattr(c, name) not in choices:
             p.append(f"--{_flag(name)}: unknown value {getattr(c, name)!r} "
                      f"(choose from {', '.join(choices)})")
     if c.eval_task is not None and c.eval_task not in TASKS:
@@ -534,19 +496,11 @@ def _task_problems(c: Config) -> list[str]:
     if not 0.0 <= c.camera_pitch <= MAX_CAMERA_PITCH:
         p.append(f"--camera-pitch must be in [0, {MAX_CAMERA_PITCH:g}] degrees, "
                  f"got {c.camera_pitch}")
-    if c.curriculum_steps is not None and c.curriculum_steps < 1:
-        p.append(f"--curriculum-steps must be at least 1, got {c.curriculum_steps}")
     if not 0.0 <= c.curriculum_dr < 1.0:
         p.append(f"--curriculum-dr must be in [0, 1), got {c.curriculum_dr}")
     if c.curriculum_dr and c.curriculum not in PHASED_CURRICULA:
-        p.append("--curriculum-dr applies to --curriculum adaptive or uniform only (for domain "
+        p.append("--curriculum-dr applies to --curriculum adaptive only (for domain "
                  "randomisation alone use --placement any-room)")
-    if c.target_update_early is not None and (c.curriculum != "adaptive"
-                                              or c.target_update_early < 1):
-        p.append("--target-update-early needs --curriculum adaptive and a count of at least 1, "
-                 f"got {c.target_update_early} with --curriculum {c.curriculum}")
-    if c.curriculum_steps is not None and c.curriculum not in PHASED_CURRICULA:
-        p.append("--curriculum-steps applies to --curriculum adaptive or uniform only")
     if c.task == "rooms" and not 2 <= c.num_rooms <= MAX_ROOMS:
         p.append(f"--num-rooms must be in 2..{MAX_ROOMS} for the rooms task, got {c.num_rooms}")
     if c.task != "rooms" and c.num_rooms != _field("num_rooms").default:
@@ -558,8 +512,7 @@ def _task_problems(c: Config) -> list[str]:
         p.append(f"--curriculum {c.curriculum} needs --task two-room or three-room, "
                  f"got {c.task}")
     if c.boulder_phases and (c.task != "three-room" or c.curriculum not in PHASED_CURRICULA):
-        p.append("--boulder-phases applies to --task three-room --curriculum adaptive or "
-                 "uniform only")
+        p.append("--boulder-phases applies to --task three-room --curriculum adaptive only")
     if c.curriculum == "schedule" and (c.task != "rooms" or not c.rooms_schedule
                                     or min(c.rooms_schedule) < 2
                                     or max(c.rooms_schedule) > MAX_ROOMS):
@@ -635,10 +588,22 @@ HELP_SECTIONS = {"task": "task", "actors": "actors", "updates": "learner",
                  "eval_every": "evaluation", "seed": "run"}
 
 
+def _presets_help() -> str:
+    import textwrap
+
+    lines = ["presets (--preset NAME):"]
+    for name, why in PRESET_REASONS.items():
+        lines += textwrap.wrap(why, 78, initial_indent=f"  {name + ':':<16}",
+                               subsequent_indent=" " * 18)
+    return "\n".join(lines)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """``--flag`` per Config field; defaults are not filled in, so only explicit flags appear."""
     parser = _Parser(prog="python -m dqn_mine.train",
                      description="Train an Ape-X style DQN agent on the mine rescue task.",
+                     epilog=_presets_help(),
+                     formatter_class=argparse.RawDescriptionHelpFormatter,
                      argument_default=argparse.SUPPRESS)
     hints = _hints()
     group = parser
@@ -717,18 +682,9 @@ def inert_settings(c: Config) -> set[str]:
     """Settings this configuration never reads, so that a run differing only in them (e.g. one
     made before such a default changed) is the same run: a sweep resumes and reports it."""
     inert = set()
-    if c.target_update_early is None:
-        inert.add("target_update_early_phase")
     if c.curriculum != "schedule":
         inert.add("rooms_schedule")
     return inert
-
-
-def target_update_interval(c: Config, phase: int) -> int:
-    """Updates between target syncs while the adaptive curriculum is in ``phase``."""
-    if c.target_update_early is not None and phase >= c.target_update_early_phase:
-        return c.target_update_early
-    return c.target_update_interval
 
 
 def learner_threads(cfg: Config, cores: Optional[int] = None) -> int:
@@ -774,7 +730,7 @@ def native_bf16(cpuinfo: str = "/proc/cpuinfo") -> bool:
 def resolve_actor_precision(name: str, envs: int):
     """The dtype of an actor's network, which steps ``envs`` environments per forward pass.
 
-    Measured (bench.learner, AVX512-BF16 core, README table): bfloat16 weights cost 0.91x
+    Measured (bench.learner, AVX512-BF16 core, docs/benchmarks.md): bfloat16 weights cost 0.91x
     float32's time per frame at 8 frames per forward, 0.79x at 16 and 0.72x at 32, but 1.18x at 1
     and 0.94x at 4; hence ``auto`` = bfloat16 where native and at least 8 environments per forward.
     """

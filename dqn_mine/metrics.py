@@ -22,7 +22,6 @@ COLUMNS = (
     # under the Ape-X rates they show what the near-greedy policy does, apart from the envs
     # that mostly explore.
     "low_eps_return", "phase_low_eps_return",
-    "target_sync",    # updates between target syncs at this row (--target-update-early moves it)
     "rewarded_episodes",   # training episodes with a reward so far (the pre-fill's included)
     "demo_share",     # --demos: the share of demonstrations in the sampled batches
     "margin_loss",    # --demos: the large-margin loss, mean over the sampled demonstrations

@@ -20,7 +20,6 @@ import sys
 from pathlib import Path
 
 from dqn_mine.config import PHASED_CURRICULA, Config
-from dqn_mine.env import tasks
 from dqn_mine.exitcodes import EXIT_BAD_INPUT
 from dqn_mine.metrics import LOW_EPSILON, read_metrics
 
@@ -47,8 +46,7 @@ def has_values(rows: list[dict], name: str) -> bool:
 def full_task_returns(rows: list[dict], cfg, low_eps: bool = False) -> list[tuple]:
     """(update, minutes, return) of the rows whose return is the full task's over a full window.
 
-    With the adaptive curriculum (or the uniform one, a phase-1 episode in every table's
-    length) that is phase 1's ``phase_return`` (its own episodes only, no
+    With the adaptive curriculum that is phase 1's ``phase_return`` (its own episodes only, no
     reviewed ones) from the row by which about ``curriculum_window`` phase-1 episodes have ended
     (estimated from the episode count since the switch and the review share, since the table
     does not count them); without it the actors' ``episode_return`` once ``return_window``
@@ -66,10 +64,7 @@ def full_task_returns(rows: list[dict], cfg, low_eps: bool = False) -> list[tupl
     if not full:
         return []
     start = full[0]["episodes"]
-    if cfg.curriculum == "uniform":
-        share = 1.0 / len(tasks.phase_table(cfg.task, cfg.boulder_phases))
-    else:
-        share = 1.0 - cfg.curriculum_review
+    share = 1.0 - cfg.curriculum_review
     return [(r["update"], r["wall_time"] / 60, r.get(key, math.nan)) for r in full
             if (r["episodes"] - start) * share >= cfg.curriculum_window]
 

@@ -2,7 +2,6 @@
 
 import contextlib
 import dataclasses
-from collections import Counter
 
 import numpy as np
 import torch
@@ -138,12 +137,12 @@ def test_evaluation_actor_unsticks_only_with_eval_unstick():
                 actor.close()
 
 
-def test_actor_ends_easier_phases_at_the_curriculum_step_limit():
-    """Episodes that start in a phase before the full task are truncated at --curriculum-steps;
-    the environment really stops there, and the episode record says so."""
+def test_actor_starts_episodes_in_the_shared_phase_and_records_them():
+    """Episodes start in the phase the shared state names, and end at the step limit; the
+    environment really stops there, and the episode record says so."""
     cfg = dataclasses.replace(Config(**PRESETS["cpu"], preset="cpu"), actors=1,
                               envs_per_actor=2, replay_capacity=4096, eval_every=0,
-                              curriculum="adaptive", curriculum_steps=25,
+                              curriculum="adaptive", max_episode_steps=25,
                               curriculum_review=0.0).validate()
     net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
     with in_process_actor(cfg, net, phase=6) as actor:
@@ -163,9 +162,9 @@ def test_actor_ends_easier_phases_at_the_curriculum_step_limit():
         assert {e.epsilon for e in records} <= rates
         assert any(e.length == 25 for e in records) or all(e.ret == 1.0 for e in records)
         actor.control.phase_cell[0] = 1           # the curriculum reached the full task
-        for _ in range(25):
+        for _ in range(26):
             actor.step()
-        assert [env.max_episode_steps for env in actor.envs] == [1000, 1000]
+        assert [env.phase for env in actor.envs] == [1, 1]
 
 
 def test_actor_counts_the_steps_of_its_finished_episodes_for_review_by_steps():
@@ -173,7 +172,7 @@ def test_actor_counts_the_steps_of_its_finished_episodes_for_review_by_steps():
     of the review episodes (started in a phase easier than the shared one)."""
     cfg = dataclasses.replace(Config(**PRESETS["cpu"], preset="cpu"), actors=1,
                               envs_per_actor=4, replay_capacity=4096, eval_every=0,
-                              curriculum="adaptive", curriculum_steps=20, curriculum_review=0.5,
+                              curriculum="adaptive", max_episode_steps=20, curriculum_review=0.5,
                               curriculum_review_unit="steps").validate()
     net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
     with in_process_actor(cfg, net, phase=4) as actor:
@@ -186,74 +185,3 @@ def test_actor_counts_the_steps_of_its_finished_episodes_for_review_by_steps():
         assert cur.review_steps == sum(e.length for e in records if e.phase > 4)
         assert (cur.all_steps, cur.dr_steps) == (cur.played_steps, 0)   # no DR episodes
         assert {e.phase for e in records} <= {4, 5, 6} and any(e.phase > 4 for e in records)
-
-
-def test_start_order_reports_each_episode_once_all_started_before_it_have_ended():
-    """Brute force: random episode lengths on 5 envs; the reports come in start order, each
-    as soon as no earlier-started episode is still running."""
-    from dqn_mine.system.actor import StartOrder
-
-    rng = np.random.default_rng(0)
-    envs = 5
-    order = StartOrder(envs)
-    start_of = list(range(envs))          # start number of each env's running episode
-    left = [int(rng.integers(1, 40)) for _ in range(envs)]
-    ended, reported, next_start = set(), [], envs
-    for _ in range(2_000):                # steps of all envs in turn, as an actor's loop
-        for j in range(envs):
-            left[j] -= 1
-            if left[j]:
-                continue
-            ended.add(start_of[j])
-            got = order.ended(j, ("episode", start_of[j]))
-            start_of[j], next_start = next_start, next_start + 1
-            left[j] = int(rng.integers(1, 40))
-            reported += [n for _, n in got]
-            # everything reported has ended, and every earlier start has been reported
-            assert set(reported) <= ended
-            assert reported == list(range(len(reported)))
-            assert all(n >= min(start_of) for n in ended - set(reported))
-    assert len(reported) > 400
-
-
-def test_actor_reports_episodes_in_start_order_with_episode_order_started(noop_network):
-    """The same actor, seeds and policy twice: in start order the reports are the episodes of
-    the end-order run sorted by the step they started (from each report's step and length).
-    Lengths differ: full-task episodes end at 60 steps, reviews of passed phases at 25."""
-    cfg = dataclasses.replace(Config(**PRESETS["cpu"], preset="cpu"), actors=1,
-                              envs_per_actor=4, replay_capacity=4096, eval_every=0,
-                              curriculum="adaptive", max_episode_steps=60,
-                              curriculum_steps=25,
-                              curriculum_review=0.5).validate()
-
-    def reports(order):
-        """(step reported, length, return) of every episode the actor reported."""
-        run_cfg = dataclasses.replace(cfg, episode_order=order)
-        out = []
-        with in_process_actor(run_cfg, net, phase=1) as actor:
-            for step in range(1, 241):
-                actor.step()
-                out += [(step, e.length, e.ret) for e in actor.control.drain_episodes()]
-        return out
-
-    net = noop_network(cfg.frame_stack, cfg.history_len)   # unstick: random moves
-    # reported as they end: the start step is the report's step less the length
-    by_end = [(step - length, length, ret) for step, length, ret in reports("ended")]
-    by_start = [(length, ret) for _, length, ret in reports("started")]
-    starts = [start for start, _, _ in by_end]
-    assert len(by_end) >= 16 and starts != sorted(starts)     # the ends reorder them
-    # started-order reports: the same episodes by start step (those that began on one step in
-    # any order), but for the last few, still waiting on an earlier start
-    expected = sorted(by_end)
-    k = 0
-    for start in sorted(set(starts)):
-        group = Counter((length, ret) for s, length, ret in expected if s == start)
-        size = sum(group.values())
-        got = Counter(by_start[k:k + size])
-        if k + size > len(by_start):      # the last group reported so far: a part of it
-            assert not got - group, f"episodes started at step {start}"
-            break
-        assert got == group, f"episodes started at step {start}"
-        k += size
-    # the envs' 60-step episodes hold back at most two 25-step ones of each other env
-    assert len(by_end) - 12 <= len(by_start) <= len(by_end)

@@ -143,9 +143,9 @@ def test_update_reports_pre_update_td_and_syncs_target():
     assert np.isfinite(out["loss"]) and out["grad_norm"] > 0
     differ = lambda: any(not torch.equal(a, b) for a, b in  # noqa: E731
                          zip(up.online.state_dict().values(), up.target.state_dict().values()))
-    assert up.updates == 1 and differ()  # online moved, target not yet synced
+    assert up.steps == 1 and differ()  # online moved, target not yet synced
     up.update(batch)
-    assert up.updates == 2 and not differ()  # synced after C = 2 updates
+    assert up.steps == 2 and not differ()  # synced after C = 2 updates
 
 
 def test_state_dict_resumes_exactly():
@@ -156,7 +156,7 @@ def test_state_dict_resumes_exactly():
         a.update(b)
     b_up = DQNUpdater(DuelingQNetwork(history_len=0), lr=1e-3, target_update_interval=3)
     b_up.load_state_dict(a.state_dict())
-    assert b_up.updates == 2
+    assert b_up.steps == 2
     for b in batches[2:]:
         out_a, out_b = a.update(b), b_up.update(b)
         assert out_a["loss"] == out_b["loss"]

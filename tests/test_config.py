@@ -25,8 +25,7 @@ def test_defaults_are_the_studys():
     c = Config()
     assert (c.actors, c.epsilon, c.epsilon_schedule, c.lr, c.batch_size, c.gamma, c.n_step) == \
         (7, 0.01, "fixed", 3e-5, 32, 0.99, 6)
-    assert (c.replay_capacity, c.per, c.zeta, c.beta0, c.eta, c.init_priority) == \
-        (1_048_576, True, 0.6, 0.4, 1e-5, "actor")
+    assert (c.replay_capacity, c.zeta, c.beta0, c.eta) == (1_048_576, 0.6, 0.4, 1e-5)
     assert (c.history_len, c.frame_stack, c.publish_interval, c.prefill, c.task) == \
         (20, 1, 500, 50_000, "two-room")
     assert parse_args([]) == c.validate()
@@ -45,15 +44,15 @@ def test_frozen():
 
 
 def test_flag_types():
-    c = parse_args(["--no-per", "--rooms-schedule", "3", "4", "--max-episode-steps", "300",
+    c = parse_args(["--no-unstick", "--rooms-schedule", "3", "4", "--max-episode-steps", "300",
                     "--replay-ratio", "0.05", "--max-grad-norm", "none", "--task", "rooms"])
-    assert c.per is False and c.rooms_schedule == (3, 4) and c.max_episode_steps == 300
+    assert c.unstick is False and c.rooms_schedule == (3, 4) and c.max_episode_steps == 300
     assert c.replay_ratio == 0.05 and c.max_grad_norm is None
-    assert parse_args(["--per"]).per is True
+    assert parse_args(["--unstick"]).unstick is True
 
 
 def test_cli_round_trip():
-    c = Config(task="rooms", num_rooms=4, room_size=12.5, max_episode_steps=123, per=False,
+    c = Config(task="rooms", num_rooms=4, room_size=12.5, max_episode_steps=123, unstick=True,
                lr=1 / 3, rooms_schedule=(4, 5), replay_ratio=0.02, eval_task="three-room",
                max_grad_norm=None, run_dir="runs/x y", preset="smoke", seed=9, serial=True,
                progress=False)
@@ -112,15 +111,13 @@ BAD = [
     (["--frame-stack", "0"], "--frame-stack"),
     (["--history-len", "-1"], "--history-len"),
     (["--target-update-interval", "0"], "--target-update-interval"),
-    (["--target-update-early", "250"], "--target-update-early"),
-    (["--preset", "cpu", "--target-update-early", "0"], "--target-update-early"),
     (["--publish-interval", "0"], "--publish-interval"),
     (["--replay-ratio", "0"], "--replay-ratio"),
     (["--max-grad-norm", "-1"], "--max-grad-norm"),
     (["--room-size", "0"], "--room-size"),
     (["--max-episode-steps", "0"], "--max-episode-steps"),
-    (["--curriculum", "adaptive", "--curriculum-steps", "0"], "--curriculum-steps"),
-    (["--curriculum-steps", "300"], "adaptive or uniform only"),
+    (["--curriculum", "uniform"], "--curriculum"),
+    (["--zeta", "-1"], "--zeta"),
     (["--task", "rooms", "--num-rooms", "1"], "--num-rooms"),
     (["--curriculum", "adaptive", "--task", "one-room"], "three-room"),
     (["--boulder-phases", "--task", "two-room", "--curriculum", "adaptive"], "three-room"),
@@ -133,7 +130,7 @@ BAD = [
     (["--task", "three-room", "--curriculum-dr", "0.5"], "--curriculum-dr"),
     (["--preset", "cpu-three-room", "--curriculum-dr", "1.0"], "--curriculum-dr"),
     (["--curriculum-review-unit", "transitions"], "--curriculum-review-unit"),
-    (["--episode-order", "finished"], "--episode-order"),
+    (["--exploration", "boltzmann"], "--exploration"),
     (["--task", "two-room", "--eval-num-rooms", "5"], "--eval-num-rooms"),
     (["--task", "rooms", "--eval-num-rooms", "13"], "--eval-num-rooms"),
     (["--bogus", "1"], "unrecognized"),
@@ -151,7 +148,7 @@ def test_bad_flags_give_one_line_errors(argv, fragment):
 
 def test_json_round_trip(tmp_path):
     c = Config(lr=1 / 3, rooms_schedule=(3, 5), max_episode_steps=None, replay_ratio=0.1 + 0.2,
-               eta=1e-7, run_dir=str(tmp_path), per=False)
+               eta=1e-7, run_dir=str(tmp_path), zeta=0.0)
     c.to_json(tmp_path / "config.json")
     back = Config.from_json(tmp_path / "config.json")
     assert back == c and isinstance(back.rooms_schedule, tuple)
@@ -178,6 +175,39 @@ def test_a_run_saved_before_the_prefill_explorer_existed_resumes_with_the_agents
     assert Config.from_json(tmp_path / "config.json").prefill_explorer == "agent"
     for preset in ("smoke", "cpu", "cpu-three-room"):    # measured with the agent's pre-fill
         assert parse_args(["--preset", preset]).prefill_explorer == "agent"
+
+
+def test_every_preset_says_why_in_help():
+    from dqn_mine.config import PRESET_REASONS
+
+    assert list(PRESET_REASONS) == list(PRESETS)
+    helptext = build_parser().format_help()
+    assert all(f"  {name}:" in helptext for name in PRESETS)
+
+
+def test_saved_configs_carry_their_version_and_older_ones_migrate(tmp_path):
+    from dqn_mine.config import CONFIG_VERSION, VERSION_KEY
+
+    c = Config(seed=3)
+    c.to_json(tmp_path / "config.json")
+    assert json.loads((tmp_path / "config.json").read_text())[VERSION_KEY] == CONFIG_VERSION
+    v1 = {**c.to_dict(), "per": False, "curriculum_steps": None, "episode_order": "ended",
+          "curriculum_review_pick": "uniform", "init_priority": "actor",
+          "target_update_early": None, "target_update_early_phase": 12}
+    (tmp_path / "v1.json").write_text(json.dumps(v1))
+    assert Config.from_json(tmp_path / "v1.json") == dataclasses.replace(c, zeta=0.0)
+    for name, value in [("curriculum_steps", 500), ("target_update_early", 250),
+                        ("curriculum_review_pick", "nearest"), ("curriculum", "uniform")]:
+        (tmp_path / "v1.json").write_text(json.dumps({**v1, name: value}))
+        with pytest.raises(ConfigError, match=f"version 1 config with {name} = "):
+            Config.from_json(tmp_path / "v1.json")
+    (tmp_path / "v9.json").write_text(json.dumps({**c.to_dict(), VERSION_KEY: 9}))
+    with pytest.raises(ConfigError, match="config version 9"):
+        Config.from_json(tmp_path / "v9.json")
+    # a version 2 config keeps today's defaults for what it lacks
+    v2 = {k: v for k, v in c.saved_dict().items() if k != "prefill_explorer"}
+    (tmp_path / "v2.json").write_text(json.dumps(v2))
+    assert Config.from_json(tmp_path / "v2.json").prefill_explorer == "bump-and-press"
 
 
 @pytest.mark.parametrize("content,fragment", [

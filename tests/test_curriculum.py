@@ -12,7 +12,6 @@ from pathlib import Path
 import pytest
 
 from dqn_mine.config import parse_args
-from dqn_mine.env.tasks import THREE_ROOM_BOULDER_PHASES
 from dqn_mine.system.curriculum import Curriculum
 from dqn_mine.system.specs import actor_specs, eval_env_kwargs, optional_env_kwargs
 
@@ -153,23 +152,6 @@ def test_episode_start_tells_the_environment_what_to_set():
     assert plain.num_rooms is None
 
 
-def test_curriculum_steps_shorten_only_the_easier_phases_episodes():
-    import numpy as np
-
-    rng = np.random.default_rng(0)
-    cfg = parse_args(["--curriculum", "adaptive", "--curriculum-steps", "300"])     # two-room
-    cur = Curriculum(cfg)
-    assert cur.episode_start(4, 0, rng) == (4, {"phase": 4, "max_episode_steps": 300})
-    # the full task keeps the task's own limit (two-room: 1,000), or the one given
-    assert cur.phase_settings(1) == {"phase": 1, "max_episode_steps": 1000}
-    longer = Curriculum(parse_args(["--curriculum", "adaptive", "--curriculum-steps", "300",
-                                    "--max-episode-steps", "1500"]))
-    assert longer.phase_settings(1)["max_episode_steps"] == 1500
-    assert longer.phase_settings(2)["max_episode_steps"] == 300
-    # without it the settings are the study's (phase only)
-    assert Curriculum(parse_args(["--curriculum", "adaptive"])).phase_settings(3) == {"phase": 3}
-
-
 # -- through real runs -------------------------------------------------------------------------
 def test_phases_advance_through_shared_state(tmp_path):
     """A threshold every episode beats moves the phase from 6 to 1; the actors follow it
@@ -180,18 +162,6 @@ def test_phases_advance_through_shared_state(tmp_path):
     phases = [int(r["phase"]) for r in rows]
     assert phases == sorted(phases, reverse=True), phases
     assert phases[-1] == 1 and phases[0] < 6
-
-
-def test_early_target_sync_holds_until_the_phase_below_the_named_one(tmp_path):
-    """--target-update-early sets the learner's sync interval while the phase is at or above
-    --target-update-early-phase, --target-update-interval from the phase below it on."""
-    rows = run("--task", "three-room", "--curriculum", "adaptive", "--curriculum-window", "6",
-               "--curriculum-threshold", "-1", "--updates", "400", "--serial",
-               "--target-update-interval", "7", "--target-update-early", "3",
-               "--target-update-early-phase", "3", "--run-dir", str(tmp_path / "cl"), *FAST)
-    seen = {(int(r["phase"]), int(r["target_sync"])) for r in rows}
-    assert all(sync == (3 if phase >= 3 else 7) for phase, sync in seen), seen
-    assert {sync for _, sync in seen} == {3, 7}, seen
 
 
 def test_review_starts_a_share_of_episodes_in_easier_phases():
@@ -328,23 +298,6 @@ def test_metrics_nan_cells_are_empty(tmp_path, value):
     assert row["update"] == 1 and row["loss"] == 0.5 and math.isnan(row["eval_return"])
 
 
-def test_nearest_review_favours_the_phase_just_passed():
-    """From phase 2 of two-room, "nearest" review draws phase 2+k with weight 2**-k: 8/15,
-    4/15, 2/15 and 1/15 of the reviewed share for phases 3, 4, 5 and 6."""
-    import numpy as np
-
-    cfg = parse_args(["--curriculum", "adaptive", "--curriculum-review", "0.4",
-                      "--curriculum-review-pick", "nearest"])
-    rng, curriculum = np.random.default_rng(1), Curriculum(cfg)
-    drawn = np.array([curriculum.review_phase(2, rng) for _ in range(30_000)])
-    shares = np.array([np.mean(drawn == p) for p in (1, 2, 3, 4, 5, 6)])
-    expected = np.array([0, 0.6, 0.4 * 8 / 15, 0.4 * 4 / 15, 0.4 * 2 / 15, 0.4 / 15])
-    assert np.abs(shares - expected).max() < 0.012, shares
-    assert {curriculum.review_phase(6, rng) for _ in range(50)} == {6}
-    # one phase passed: review always draws it
-    assert set(curriculum.review_phase(5, rng) for _ in range(200)) == {5, 6}
-
-
 def test_curriculum_dr_starts_a_share_of_episodes_as_the_randomised_full_task():
     import numpy as np
 
@@ -413,28 +366,6 @@ def test_curriculum_dr_by_steps_gives_randomised_episodes_that_share_of_the_step
     no_review.played(DR_PHASE, 2_000)
     assert no_review.episode_start(16, 0, rng)[0] == 16           # 2,000 >= 0.3 * 2,800
     assert rng.bit_generator.state == state, "the decision draws no random number"
-
-
-
-def test_uniform_curriculum_draws_every_phase_alike_and_never_switches():
-    import numpy as np
-
-    cfg = parse_args(["--preset", "cpu-three-room", "--curriculum", "uniform",
-                      "--curriculum-window", "3", "--curriculum-steps", "1000"])
-    cur, rng = Curriculum(cfg), np.random.default_rng(0)
-    n = len(THREE_ROOM_BOULDER_PHASES)
-    assert (cur.phase, cur.easiest, cur.logged_phase) == (1, n, 1)
-    starts = [cur.episode_start(cur.phase, 0, rng) for _ in range(1_000 * n)]
-    counts = np.bincount([phase for phase, _ in starts], minlength=n + 1)[1:]
-    assert counts.min() > 850 and counts.max() < 1150      # 1,000 each, +-4.7 sigma
-    limits = {phase: s["max_episode_steps"] for phase, s in starts}
-    assert limits[1] == 2000 and {limits[p] for p in range(2, n + 1)} == {1000}
-    for ret in (1.0, 1.0, 1.0, 1.0):
-        cur.record(1, ret)         # the full task's episodes make phase_return
-    cur.record(7, 0.0)
-    cur.advance(updates=10)
-    assert cur.phase == 1 and cur.phase_return == 1.0
-    assert Curriculum(cfg, phase=7).phase == 1, "a resumed run keeps drawing from all phases"
 
 
 def test_room_colours_reach_the_training_and_the_evaluation_envs():

@@ -86,6 +86,32 @@ def test_evaluate_plays_by_default_what_the_runs_evaluation_actor_plays(run_dir,
     assert (scores["epsilon"], scores["unstick"]) == (0.01, False)
 
 
+def test_a_checkpoint_of_config_version_1_evaluates_or_fails_in_one_line(run_dir, tmp_path):
+    """A checkpoint saved before config versions: its settings migrate (no prefill_explorer:
+    the agent's; per off: zeta 0; removed settings at their neutral values dropped); one that
+    used a removed setting fails in one line that names its version."""
+    import torch
+
+    from dqn_mine import checkpoint as ckpt
+
+    saved = ckpt.load(run_dir)
+    old = {k: v for k, v in saved["config"].items() if k != "prefill_explorer"}
+    old.update(per=False, episode_order="ended", init_priority="actor",
+               target_update_early_phase=17)
+    (tmp_path / "v1").mkdir()
+    torch.save({**saved, "config": old}, tmp_path / "v1" / "checkpoint.pt")
+    config = ckpt.load(tmp_path / "v1")["config"]
+    assert (config["zeta"], config["prefill_explorer"]) == (0.0, "agent") and "per" not in config
+    res = evaluate(str(tmp_path / "v1"), "--episodes", "1", "--max-steps", "20")
+    assert res.returncode == 0, res.stderr
+    (tmp_path / "started").mkdir()
+    torch.save({**saved, "config": {**old, "episode_order": "started"}},
+               tmp_path / "started" / "checkpoint.pt")
+    res = evaluate(str(tmp_path / "started"), "--episodes", "1")
+    assert res.returncode == 2 and res.stderr.strip().count("\n") == 0
+    assert "version 1" in res.stderr and "episode_order" in res.stderr
+
+
 def test_load_agent_plays_an_episode_like_the_readme(run_dir):
     agent = dqn_mine.load_agent(run_dir)
     env = MineRescueEnv(task="one-room", room_size=8.0, max_episode_steps=30)

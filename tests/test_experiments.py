@@ -69,11 +69,11 @@ def test_grid_expands_to_valid_runs(name, scale, tmp_path):
 def test_ablation_settings_are_the_studys_at_paper_scale(tmp_path):
     grid = load_grid("ablation")
     cfgs = {r.config_name: r.cfg for r in grid.expand("paper", tmp_path, seeds=[0])}
-    assert {k: (c.actors, c.per, c.n_step) for k, c in cfgs.items()} == {
-        "all-included": (7, True, 6), "no-n-step": (7, True, 1),
-        "no-distribution": (1, True, 6), "no-per": (7, False, 6),
-        "none-included": (1, False, 1)}
-    assert all(c.task == "two-room" and c.lr == 3e-5 and c.zeta == 0.6 for c in cfgs.values())
+    assert {k: (c.actors, c.zeta, c.n_step) for k, c in cfgs.items()} == {
+        "all-included": (7, 0.6, 6), "no-n-step": (7, 0.6, 1),
+        "no-distribution": (1, 0.6, 6), "no-per": (7, 0.0, 6),
+        "none-included": (1, 0.0, 1)}
+    assert all(c.task == "two-room" and c.lr == 3e-5 for c in cfgs.values())
 
 
 def test_precedence_of_overrides(tmp_path):
@@ -149,23 +149,22 @@ def test_run_states_decide_skip_resume_restart(tmp_path):
 
 
 def test_a_setting_the_run_never_reads_is_no_conflict(tmp_path):
-    # A schedule run made when --target-update-early-phase defaulted to 12 (it now is 17) never
-    # read it (no --target-update-early): still the grid's run. Were it read, a conflict.
+    # A run without the schedule curriculum, made when --rooms-schedule had another value,
+    # never read it: still the grid's run. The schedule run read it: a conflict.
     import dataclasses
 
-    spec = next(s for s in load_grid("scaling").expand("cpu", tmp_path, seeds=[0])
-                if s.cfg.curriculum == "schedule")
-    done = {"exit_code": 0, "updates": spec.cfg.updates}
-    _fake_run(spec, done, cfg=dataclasses.replace(spec.cfg, target_update_early_phase=12))
-    assert run_state(spec) == "complete"
-    read = dataclasses.replace(spec, cfg=dataclasses.replace(
-        spec.cfg, target_update_early=500, run_dir=str(tmp_path / "read")))
-    _fake_run(read, done, cfg=dataclasses.replace(read.cfg, target_update_early_phase=12))
+    specs = load_grid("scaling").expand("cpu", tmp_path, seeds=[0])
+    unread = next(s for s in specs if s.cfg.curriculum != "schedule")
+    read = next(s for s in specs if s.cfg.curriculum == "schedule")
+    for spec in (unread, read):
+        done = {"exit_code": 0, "updates": spec.cfg.updates}
+        _fake_run(spec, done, cfg=dataclasses.replace(spec.cfg, rooms_schedule=(2, 3)))
+    assert run_state(unread) == "complete"
     assert run_state(read).startswith("conflict")
-    assert "target_update_early_phase 12 != 17" in run_state(read)
-    no_schedule = dataclasses.replace(spec.cfg, curriculum="none")
+    assert "rooms_schedule" in run_state(read)
+    no_schedule = dataclasses.replace(read.cfg, curriculum="none")
     assert "rooms_schedule" in inert_settings(no_schedule)
-    assert "rooms_schedule" not in inert_settings(spec.cfg)
+    assert "rooms_schedule" not in inert_settings(read.cfg)
 
 
 def test_a_run_that_spent_its_minutes_is_complete(tmp_path):

@@ -141,7 +141,7 @@ def test_bfloat16_resumes_from_a_float32_checkpoint():
     for seed in range(2):
         ref.update(frames_batch(16, seed=seed))
     fast.load_state_dict(ref.state_dict())
-    assert fast.updates == 2
+    assert fast.steps == 2
     for a, b in zip(fast.online.parameters(), ref.online.parameters()):
         assert torch.equal(a, b)
     # the working copies were refreshed from the loaded weights

@@ -91,9 +91,9 @@ def test_importance_weights_match_the_formula(storage):
     assert batch.weights.dtype == np.float32 and batch.weights.max() <= 1.0
 
 
-def test_update_priorities_and_max_mode(storage):
-    storage.priority[:999] = np.nan                # "max" mode ignores the writers' priorities
-    replay = PrioritizedReplay(storage, zeta=0.5, eta=0.01, seed=5, init_priority="max")
+def test_update_priorities_and_writers_without_q_values(storage):
+    storage.priority[:1000] = np.nan               # written without Q values: the largest so far
+    replay = PrioritizedReplay(storage, zeta=0.5, eta=0.01, seed=5)
     replay.ingest()
     np.testing.assert_allclose(replay.sum_tree.values[:999], 1.0)
     replay.update_priorities(np.array([3, 4, 4]), np.array([-8.99, 1.0, 15.99]))

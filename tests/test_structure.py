@@ -104,6 +104,28 @@ def test_no_function_is_longer_than_sixty_lines_outside_the_benchmarks():
     assert not too_long, "\n".join(too_long)
 
 
+MAX_COMMENT_LINES = 12   # a longer story belongs in docs/, with the runs behind it
+
+
+def _long_comment_blocks(path: Path) -> list[str]:
+    """'path:line (n lines)' of every run of more than MAX_COMMENT_LINES comment lines."""
+    found, run = [], 0
+    lines = path.read_text().splitlines()
+    for number, line in enumerate([*lines, ""], start=1):
+        if line.strip().startswith("#"):
+            run += 1
+            continue
+        if run > MAX_COMMENT_LINES:
+            found.append(f"{path.relative_to(ROOT)}:{number - run} ({run} lines)")
+        run = 0
+    return found
+
+
+def test_no_comment_block_is_longer_than_twelve_lines():
+    too_long = [b for path in sorted(PACKAGE.rglob("*.py")) for b in _long_comment_blocks(path)]
+    assert not too_long, "\n".join(too_long)
+
+
 # A repository path in code or docs: docs/x.md, dqn_mine/env/tasks.py, tests/test_x.py, ...
 CITED = re.compile(r"(?<![\w/.])"
                    r"((?:docs|dqn_mine|tests|experiments)/[\w./-]*\w\.(?:md|py|png|gif))")

@@ -169,7 +169,9 @@ class DQNUpdater:
         self.target_update_interval = target_update_interval
         self.max_grad_norm = max_grad_norm
         self.demo_margin, self.demo_weight = demo_margin, demo_weight
-        self.updates = 0
+        # every gradient step, demo pre-training included: what the target sync counts (the
+        # run's own update count, which leaves pre-training out, is the Learner's)
+        self.steps = 0
         self._work = self._work_target = None
         if lowered:
             self._work = WorkingCopy(self.online, torch.bfloat16)
@@ -190,8 +192,8 @@ class DQNUpdater:
         self.optimizer.step()
         if self._work is not None:
             self._work.pull()
-        self.updates += 1
-        if self.updates % self.target_update_interval == 0:
+        self.steps += 1
+        if self.steps % self.target_update_interval == 0:
             self.sync_target()
         demos = batch.demo.sum() if batch.demo is not None else torch.zeros((), device=loss.device)
         stats = torch.stack([loss.detach(), q_taken.mean(), batch.ret.mean(),
@@ -236,7 +238,7 @@ class DQNUpdater:
     def state_dict(self) -> dict:
         """Everything a checkpoint needs to continue exactly: networks, optimiser, counters."""
         return {"online": self.online.state_dict(), "target": self.target.state_dict(),
-                "optimizer": self.optimizer.state_dict(), "updates": self.updates}
+                "optimizer": self.optimizer.state_dict(), "updates": self.steps}
 
     def load_state_dict(self, state: dict) -> None:
         self.online.load_state_dict(state["online"])
@@ -244,7 +246,7 @@ class DQNUpdater:
         # torch's optimiser keeps (not copies) same-device state tensors: without a copy two
         # updaters loaded from one dict would share their Adam moments.
         self.optimizer.load_state_dict(copy.deepcopy(state["optimizer"]))
-        self.updates = int(state["updates"])
+        self.steps = int(state["updates"])
         if self._work is not None:
             self._work.pull()
             self._work_target.pull()

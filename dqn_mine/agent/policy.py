@@ -42,7 +42,7 @@ class AgentPolicy:
         """``held``: random actions held with the run's ``--ez-mu`` and ``--ez-max-duration``.
         Raises CheckpointError (one line) for a missing or corrupt checkpoint."""
         from dqn_mine import checkpoint as ckpt
-        from dqn_mine.config import Config, network_shape
+        from dqn_mine.config import network_shape
 
         state = ckpt.load(path)
         shape = network_shape(state["config"])
@@ -53,7 +53,7 @@ class AgentPolicy:
             raise ckpt.CheckpointError(f"{path}: the network weights do not fit "
                                        f"({str(exc).splitlines()[0]})") from None
         # unstick as the run's actors did: the same loop length counts as stuck
-        config = {**vars(Config()), **state["config"]}   # an older run lacks newer fields
+        config = state["config"]
         cycle = config["unstick_cycle"]
         durations = (config["ez_mu"], config["ez_max_duration"]) if held else None
         return cls(net, shape["frame_stack"], shape["history_len"], epsilon, seed, unstick, cycle,

@@ -20,7 +20,7 @@ from dqn_mine.env.mesh import VERTEX_FLOATS, VERTEX_FORMAT
 # llvmpipe rasterises on LP_NUM_THREADS extra threads. At 76x44 the hand-off costs more than the
 # rasterisation it spreads, and with several actor processes per core the extra threads only fight
 # each other: rendering in the calling thread (0) was fastest for 1 and 2 processes (see
-# dqn_mine/bench/env.py and the README's benchmark table). Users can still override it.
+# dqn_mine/bench/env.py and docs/benchmarks.md). Users can still override it.
 DEFAULT_LP_NUM_THREADS = "0"
 
 _VERTEX_SHADER = """

@@ -90,35 +90,12 @@ TWO_ROOM_PHASES = {
     6: Phase(1, 1, True),
 }
 # three-room with ``boulder_phases=True``: the study's six phases (here 23, 22, 21, 18, 10, 1) with
-# seven steps inserted before each phase that must clear a doorway (as two-room's phases 4-2: the
-# doorway already cleared, the same a few steps from the doorway, its boulder in hand there, its
-# boulder in hand anywhere in the room, a start facing it within reach, a start a few steps from
-# it; and, first, the boulder in hand one room further on; doorway 0-1 has an eighth, a few steps
-# from it with the doorway beyond cleared too), and starts facing the kit and a few
-# steps from it before the first phase that must take it. Each fixes a stall seen in a run
-# (docs/three_room.md): without the near-kit phase the agent that had only ever started with the
-# kit in hand left room 2 without it; without the cleared-doorway phases the step to "room 1
-# holding the boulder of doorway 1-2" asked for two new skills at once and never passed; an agent
-# that takes a boulder carries it through the doorway it cleared (nothing stops it) and then did
-# not know how to let go of it next to the kit (it wandered room 2 holding it for hundreds of
-# steps), hence the phases that start in the next room with the boulder still in hand; and an
-# agent that started 2-4 units from a boulder it had only ever held turned away from it (two runs
-# sat 36 minutes there), hence the start facing it, one press of action 4 from holding it; an
-# agent that delivered from room 1 8 times in 8 stayed in room 0 when it started anywhere there
-# with the doorway cleared (it had only been in the miner's room carrying the kit; two runs sat
-# 24 and 31 minutes there), hence the start a few steps from the cleared doorway; an agent
-# that started anywhere in room 0 holding the boulder put it down and took it up again (a
-# boulder just put down looks like one the facing phases reward taking; 32 minutes there),
-# hence the start holding it a few steps from its doorway, as after taking it; and the agent
-# that started a few steps from the cleared doorway 0-1 with doorway 1-2 still blocked was lost
-# in room 0 with nothing in hand (it had only been there carrying the kit; its greedy actions
-# dithered left-right and forward-back, and a third of its episodes never left room 0, even from
-# a step before the doorway; four runs sat 20-26 minutes there), hence the same start with
-# doorway 1-2 cleared too, where the reward is half as far: after it the start with 1-2 blocked
-# took 3,500 updates instead of 21,000 (from one checkpoint of held-out seed 10). The
-# kit within reach is mostly below the view (the floor in view begins 2.6 units ahead): the
-# start facing it is placed where it still shows, and an agent that carries it home 8 times in 8
-# took it in 2 of 8 starts a few steps away.
+# seven steps inserted before each phase that must clear a doorway (the boulder in hand one room
+# further on, the doorway cleared, the same a few steps from it, its boulder in hand there and
+# anywhere in the room, a start facing it within reach, a start a few steps from it; doorway 0-1
+# has an eighth, with the doorway beyond cleared too), and starts facing the kit and a few steps
+# from it before the first phase that must take it. Each start fixes a stall seen in a run, where
+# a step asked for two new skills at once; the runs are in docs/three_room.md.
 
 
 def _doorway_phases(door: int, doors: int) -> list[Phase]:

@@ -24,7 +24,7 @@ Wiring (the runner owns the shared memory; see ``dqn_mine.shared``)::
     w.history()                                            # int8[h], oldest first, -1 = none
 
     # learner process: the only owner of the trees, so no lock on the sampling path
-    replay = PrioritizedReplay(storage, zeta=0.6, eta=1e-5, seed=0, init_priority="actor")
+    replay = PrioritizedReplay(storage, zeta=0.6, eta=1e-5, seed=0)
     replay.ingest()                                        # cheap; call before every sample
     out = Batch.empty(layout, 32)                          # optional: reuse the batch arrays
     batch = replay.sample(32, beta=beta_at(update, total_updates, 0.4), out=out)

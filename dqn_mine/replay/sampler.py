@@ -57,18 +57,15 @@ def beta_at(update: int, total_updates: int, beta0: float) -> float:
 class PrioritizedReplay:
     """Proportional prioritised sampling over a :class:`ReplayStorage` (learner process only).
 
-    ``init_priority="actor"`` takes each new transition's priority from its writer (Ape-X);
-    ``"max"`` gives it the largest priority seen so far. ``zeta=0`` is uniform replay.
+    Each new transition's priority comes from its writer (Ape-X); one written without Q values
+    (NaN) gets the largest priority seen so far. ``zeta=0`` is uniform replay.
     Demonstrations (the layout's last ``demo_streams``) get ``demo_bonus`` added to their
     priority, as DQfD's epsilon_d, so they keep being sampled once learned.
     """
 
     def __init__(self, storage: ReplayStorage, zeta: float = 0.6, eta: float = 1e-5,
-                 seed: int | None = 0, init_priority: str = "actor", demo_bonus: float = 0.0):
-        if init_priority not in ("actor", "max"):
-            raise ValueError("init_priority must be 'actor' or 'max'")
+                 seed: int | None = 0, demo_bonus: float = 0.0):
         self.storage, self.zeta, self.eta = storage, float(zeta), float(eta)
-        self.init_priority = init_priority
         self.demo_from, self.demo_bonus = storage.layout.demo_from, float(demo_bonus)
         self.rng = np.random.default_rng(seed)
         self.sum_tree = SumTree(storage.capacity)
@@ -116,11 +113,8 @@ class PrioritizedReplay:
             dead = dead[~np.isin(dead, new)]
         starts = self.storage.boot_off[new] > 0      # episode-final frames start nothing
         real = new[starts]
-        if self.init_priority == "actor":            # NaN: a writer without Q values
-            p = self.storage.priority[real].astype(np.float64)
-            p[np.isnan(p)] = self._max_p
-        else:
-            p = np.full(real.size, self._max_p)
+        p = self.storage.priority[real].astype(np.float64)
+        p[np.isnan(p)] = self._max_p                 # NaN: a writer without Q values
         values = np.zeros(new.size)                  # [new] p^zeta, 0 where nothing starts
         values[starts] = p ** self.zeta
         self._live += int(np.count_nonzero(values))

@@ -79,8 +79,8 @@ class NStepWriter:
         """Record ``a_t`` (chosen with ``q_values`` = Q(s_t, .)), ``r_{t+1}`` and ``s_{t+1}``.
 
         ``next_q`` = Q(s_{t+1}, .) only matters when ``truncated`` (bootstrap of the initial
-        priority; 0 if omitted). ``q_values=None`` is fine with ``init_priority="max"`` (the
-        writer's priorities are then NaN and the replay ignores them). ``q_values`` is copied.
+        priority; 0 if omitted). With ``q_values=None`` the writer's priorities are NaN and the
+        replay gives them its largest priority so far. ``q_values`` is copied.
         """
         cur = self._current
         if cur is None:

@@ -120,14 +120,7 @@ class ActorBase:
         self.episodes += 1
         self.between_episodes(j)
         self.new_episode(j)
-        for episode in self.reported(j, record):
-            self.control.record_episode(episode)
-
-    def reported(self, j: int, record: tuple) -> list[tuple]:
-        """The finished episodes to report now that environment j's episode ended with
-        ``record`` and its next one began: that one (see :class:`StartOrder` for another
-        order)."""
-        return [record]
+        self.control.record_episode(record)
 
     def between_episodes(self, j: int) -> None:
         """What a kind of actor does after an episode of environment j ended, before the next."""
@@ -150,29 +143,6 @@ class ActorBase:
             env.close()
 
 
-class StartOrder:
-    """Reports an actor's finished episodes in the order they started: an episode is reported
-    once every episode the actor started before it has ended.
-
-    In the order they end, the first episodes after a phase switch are the quick ones (in a
-    2,000-step phase, for the first 2,000 steps only successes can end), and a window filled
-    then overstates the phase's success rate. In start order the window is the phase's first
-    episodes, whatever their length. The cost: a report waits up to one episode longer."""
-
-    def __init__(self, num_envs: int):
-        self.running = list(range(num_envs))    # start number of each env's current episode
-        self.next_start = num_envs
-        self.waiting: dict[int, tuple] = {}     # start number -> record of an ended episode
-
-    def ended(self, j: int, record) -> list:
-        """Env j's episode ended with ``record`` and its next one began: what to report now."""
-        self.waiting[self.running[j]] = record
-        self.running[j], self.next_start = self.next_start, self.next_start + 1
-        oldest = min(self.running)
-        ready = sorted(n for n in self.waiting if n < oldest)
-        return [self.waiting.pop(n) for n in ready]
-
-
 class Actor(ActorBase):
     """A training actor on ``len(spec.streams)`` environments, one replay stream each."""
 
@@ -187,11 +157,7 @@ class Actor(ActorBase):
         self.paths = [PathStarts(np.random.default_rng([spec.seed, j]), env.max_episode_steps)
                       for j, env in enumerate(self.envs)] if self.curriculum.backward else None
         self.writers = [NStepWriter(storage, stream=s, eta=cfg.eta) for s in spec.streams]
-        self.order = StartOrder(spec.num_envs) if cfg.episode_order == "started" else None
         self.start_envs()
-
-    def reported(self, j: int, record: tuple) -> list[tuple]:
-        return [record] if self.order is None else self.order.ended(j, record)
 
     def apply_curriculum(self, j: int) -> None:
         """Read the shared curriculum state and set it on environment j (the episode is recorded

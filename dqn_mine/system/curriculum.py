@@ -8,10 +8,6 @@ The kinds (``--curriculum``):
   episodes starts in an easier phase already passed (see :meth:`Curriculum.review_phase`);
   with ``curriculum_dr`` > 0 a share starts as the full task with random rooms (domain
   randomisation; recorded as phase 0).
-- ``uniform`` (two-room and three-room): every episode starts in a phase drawn uniformly from the
-  task's table, the full task included, from the first episode on, with no switches (a reverse
-  curriculum without its waits: all phases learn at once, as under domain randomisation);
-  ``phase`` stays 1 and ``phase_return`` is the full task's episodes' return.
 - ``schedule`` (the rooms task): ``num_rooms`` follows the room counts of the schedule, each for
   an equal share of the updates.
 - ``backward`` (every task): episodes start on the scripted expert's solution of the episode,
@@ -47,7 +43,6 @@ class Curriculum:
         the updates already made (the schedule's position)."""
         self.kind = cfg.curriculum
         self.threshold, self.review = cfg.curriculum_threshold, cfg.curriculum_review
-        self.review_pick = cfg.curriculum_review_pick
         self.review_by_steps = cfg.curriculum_review_unit == "steps"
         self.dr_share = cfg.curriculum_dr
         # an actor's steps since the phase it last saw changed: all, and those of review episodes
@@ -60,13 +55,11 @@ class Curriculum:
         self.backward = self.kind == "backward"
         self.step = cfg.backward_step
         self.easiest = max(phase_table(cfg.task, cfg.boulder_phases)) if self.phased else 0
-        # adaptive: the current phase (1 = the full task); uniform: 1; 0 without phases
+        # adaptive: the current phase (1 = the full task); 0 without phases
         self.phase = self._start_phase(phase)
         # schedule: the current room count; None without the schedule
         self.num_rooms: int | None = None
         self.window = cfg.curriculum_window
-        # adaptive: the step limits of an easier phase's episodes and of the full task's
-        self.phase_steps = cfg.curriculum_steps
         self.full_steps = cfg.max_episode_steps or TASKS[cfg.task].step_limit
         self.returns = Rolling(self.window)             # current phase's episodes only
         self.shares = Rolling(self.window)      # backward: their starts' shares of the solution
@@ -74,8 +67,6 @@ class Curriculum:
         self._follow_schedule(updates)
 
     def _start_phase(self, resumed: int | None) -> int:
-        if self.kind == "uniform":
-            return 1
         if self.backward:
             return self.step if resumed is None else int(resumed)
         if self.kind != "adaptive" or resumed is None:
@@ -174,8 +165,7 @@ class Curriculum:
                 self.seen_phase, self.played_steps, self.review_steps = phase, 0, 0
             if self.dr_share and self._randomises(rng):
                 return DR_PHASE, self.dr_settings()
-            phase = (int(rng.integers(1, self.easiest + 1)) if self.kind == "uniform"
-                     else self.review_phase(phase, rng))
+            phase = self.review_phase(phase, rng)
             return phase, self.phase_settings(phase)
         if self.kind == "schedule":
             return phase, {"num_rooms": num_rooms}
@@ -198,49 +188,28 @@ class Curriculum:
             self.review_steps += steps
 
     def phase_settings(self, phase: int) -> dict:
-        """The environment settings of an episode that starts in ``phase``. With
-        ``curriculum_steps`` an easier phase's episode ends sooner (or later) than the full
-        task's, which keeps the task's own limit. A shorter limit trades the steps a failed start
-        wanders for more starts; it also cuts off a learning agent's slow successes (on two-room
-        500 steps did not help one run; docs/exploration.md)."""
-        settings = {"phase": phase, "placement": "fixed"} if self.dr_share else {"phase": phase}
-        if self.phase_steps is not None:
-            settings["max_episode_steps"] = self.full_steps if phase == 1 else self.phase_steps
-        return settings
+        """The environment settings of an episode that starts in ``phase``."""
+        return {"phase": phase, "placement": "fixed"} if self.dr_share else {"phase": phase}
 
     def dr_settings(self) -> dict:
-        """A domain-randomised episode: the full task's boulders and step limit, agent, kit and
-        miner each in a random room (which includes every phase's rooms, but no boulder moved
-        aside or kit in hand)."""
-        settings = {"phase": None, "placement": "any-room"}
-        if self.phase_steps is not None:
-            settings["max_episode_steps"] = self.full_steps
-        return settings
+        """A domain-randomised episode: the full task's boulders, agent, kit and miner each in
+        a random room (which includes every phase's rooms, but no boulder moved aside or kit
+        in hand)."""
+        return {"phase": None, "placement": "any-room"}
 
     def review_phase(self, phase: int, rng: np.random.Generator) -> int:
         """The phase an episode starts in: with probability ``review`` an easier one already
         passed (uniformly), else ``phase``. Reviewed episodes keep the rewards of the skills the
-        current phase builds on flowing into the replay after a switch (without them the replay
-        soon holds only the new phase's failures and what was learned decays); only episodes of
-        the current phase count towards the next switch. No random number is drawn without
-        review, so the study's rule draws the same episodes as before review existed.
+        current phase builds on flowing into the replay after a switch; only episodes of the
+        current phase count towards the next switch. No random number is drawn without review,
+        so the study's rule draws the same episodes as before review existed.
 
-        ``review_pick`` "nearest" weights the phase k steps easier by 2**-k, so the phase just
-        passed (whose skill the current one builds on directly) is reviewed most: with uniform
-        picks from phase 2 each of phases 3-6 got 7.5% of the episodes, and on seed 1 the
-        held-boulder skill of phase 3 decayed while phase 2 stalled.
-
-        ``curriculum_review_unit`` "steps" makes ``review`` a share of the actor's steps, not of its
-        episodes: a passed phase's successful episode is short and a new phase's failing one
-        runs to the step limit, so with 30% of the episodes reviewed on three-room only ~4% of
-        the transitions came from passed phases, and their skills decayed (docs/three_room.md)."""
+        ``curriculum_review_unit`` "steps" makes ``review`` a share of the actor's steps, not of
+        its episodes: a passed phase's successful episode is short and a new phase's failing one
+        runs to the step limit (docs/three_room.md)."""
         if phase >= self.easiest or self.review == 0 or not self._reviews(rng):
             return phase
-        if self.review_pick == "uniform":
-            return int(rng.integers(phase + 1, self.easiest + 1))
-        easier = np.arange(phase + 1, self.easiest + 1)
-        weights = 0.5 ** (easier - phase)
-        return int(rng.choice(easier, p=weights / weights.sum()))
+        return int(rng.integers(phase + 1, self.easiest + 1))
 
     def _randomises(self, rng: np.random.Generator) -> bool:
         """Whether the next episode is domain-randomised: a draw per episode, or while such

@@ -102,8 +102,8 @@ class Learner:
                                                                       device),
                                   demo_margin=cfg.demo_margin,
                                   demo_weight=cfg.demo_loss_weight if demos else 0.0)
-        self.replay = PrioritizedReplay(storage, zeta=cfg.zeta if cfg.per else 0.0, eta=cfg.eta,
-                                        seed=cfg.seed, init_priority=cfg.init_priority,
+        self.replay = PrioritizedReplay(storage, zeta=cfg.zeta, eta=cfg.eta,
+                                        seed=cfg.seed,
                                         demo_bonus=cfg.demo_bonus if demos else 0.0)
         self.restored = 0
         if replay_snapshot is not None:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from dqn_mine import checkpoint as ckpt
-from dqn_mine.config import Config, learner_threads, target_update_interval
+from dqn_mine.config import Config, learner_threads
 from dqn_mine.demos import DemoSet
 from dqn_mine.exitcodes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from dqn_mine.metrics import MetricsTable, RateMeter, progress_postfix
@@ -165,13 +165,6 @@ class Run:
                 self.curriculum.record(ep.phase, ep.ret, ep.epsilon, ep.start_share)
         self.curriculum.advance(self.updates())
         self.ctx.control.show_curriculum(self.curriculum)
-        self.follow_target_schedule()
-
-    def follow_target_schedule(self) -> None:
-        """The target sync interval the curriculum's phase asks for (--target-update-early)."""
-        if self.ctx.learner is not None:
-            self.ctx.learner.updater.target_update_interval = target_update_interval(
-                self.cfg, self.curriculum.phase)
 
     # -- phases of the run -------------------------------------------------------------------
     def execute(self) -> Summary:
@@ -347,7 +340,6 @@ class Run:
                "full_task_episodes": stats.full_episodes,
                "low_eps_return": stats.low_eps_returns.mean,
                "phase_low_eps_return": self.curriculum.phase_low_eps_return,
-               "target_sync": learner.updater.target_update_interval,
                "rewarded_episodes": stats.rewarded}
         row.update({k: _mean(v) for k, v in agg.items()})
         self.metrics.write(row)

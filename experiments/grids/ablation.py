@@ -4,11 +4,11 @@ from experiments.scales import PAPER_NOTE, QUICK, QUICK_NOTE, SMOKE, SMOKE_NOTE
 
 TITLE = "Ablation: n-step returns, distributed actors and prioritised replay (two-room)"
 CONFIGS = {
-    "all-included": {"actors": 7, "per": True, "n_step": 6},
-    "no-n-step": {"actors": 7, "per": True, "n_step": 1},
-    "no-distribution": {"actors": 1, "per": True, "n_step": 6},
-    "no-per": {"actors": 7, "per": False, "n_step": 6},
-    "none-included": {"actors": 1, "per": False, "n_step": 1},
+    "all-included": {"actors": 7, "n_step": 6},
+    "no-n-step": {"actors": 7, "n_step": 1},
+    "no-distribution": {"actors": 1, "n_step": 6},
+    "no-per": {"actors": 7, "zeta": 0.0, "n_step": 6},      # zeta 0: uniform replay
+    "none-included": {"actors": 1, "zeta": 0.0, "n_step": 1},
 }
 BASE = {"task": "two-room"}
 MANY = {"actors": 2}  # "distributed" on 2 cores
