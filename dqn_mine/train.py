@@ -12,6 +12,7 @@ Exit codes: 0 finished, 1 an actor or the learner failed, 2 bad input, 130 stopp
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import sys
@@ -94,6 +95,14 @@ def open_run(cfg: Config) -> tuple[Config, Path, dict | None]:
     return cfg, run_dir, state
 
 
+def discard_fresh_run(run_dir: Path) -> None:
+    """Remove what open_run wrote for a new run, and the folder if nothing else is in it."""
+    for name in ("config.json", "machine.jsonl"):
+        (run_dir / name).unlink(missing_ok=True)
+    with contextlib.suppress(OSError):
+        run_dir.rmdir()
+
+
 def report(summary) -> None:
     s = summary
     print(f"\n{PROG}: {s.reason} after {s.updates} updates, {s.env_steps} env steps, "
@@ -108,7 +117,7 @@ def report(summary) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     from dqn_mine.demos import DemoError
-    from dqn_mine.system.runner import Run
+    from dqn_mine.system.runner import NothingTrained, Run
 
     try:
         cfg = parse_args(argv)
@@ -118,9 +127,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_BAD_INPUT
     try:
         summary = Run(cfg, run_dir, state, serial=cfg.serial, progress=cfg.progress).execute()
-    except DemoError as exc:   # the expert could not make them: nothing was trained
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+    except (DemoError, NothingTrained) as exc:   # before anything was trained
+        if state is None:   # the same command can start it again
+            discard_fresh_run(run_dir)
+        print(f"{PROG}: {'' if isinstance(exc, NothingTrained) else 'error: '}{exc}",
+              file=sys.stderr)
+        return EXIT_INTERRUPTED if isinstance(exc, NothingTrained) else EXIT_BAD_INPUT
     except KeyboardInterrupt:  # a second Ctrl-C during the shutdown itself
         print(f"\n{PROG}: stopped at once by a second SIGINT during the shutdown; resume from "
               f"the last checkpoint with: python -m {PROG} --resume {run_dir}", file=sys.stderr)

@@ -259,6 +259,30 @@ def test_second_sigint_stops_at_once_in_one_line_and_leaves_a_resumable_run(tmp_
     assert not (tmp_path / "replay").exists() or not any((tmp_path / "replay").iterdir())
 
 
+def test_sigint_while_the_expert_plans_demonstrations_stops_in_one_line(tmp_path):
+    """Nothing exists yet: the run stops at once, says so in one line, and leaves no run folder
+    in the way of the same command (nor a process or a segment)."""
+    run_dir = tmp_path / "plan"
+    argv = [a for a in TINY if a != "--no-progress"]      # the planning bar says when it plans
+    proc = subprocess.Popen(train_cmd(*argv, "--demos", "5000", "--run-dir", str(run_dir)),
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        seen = ""
+        while "planning" not in seen:
+            char = proc.stderr.read(1)
+            assert char, f"exited before planning: {seen[-2000:]}"
+            seen += char
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err[-3000:]
+    last = err.strip().splitlines()[-1]
+    assert "Traceback" not in err and "while the expert planned" in last
+    assert not run_dir.exists()
+
+
 def test_killed_actor_stops_the_run_with_an_error(tmp_path):
     run_dir = tmp_path / "kill"
     proc = subprocess.Popen(train_cmd(*TINY, "--updates", "100000", "--run-dir", str(run_dir)),

@@ -59,6 +59,11 @@ class Summary:
     rewarded_episodes: int = 0    # training episodes with a reward, over every start of the run
 
 
+class NothingTrained(Exception):
+    """The run stopped before anything was allocated or trained (a signal while the expert
+    planned the demonstrations); the message is one line."""
+
+
 class StopSignals:
     """SIGINT/SIGTERM set a flag the loops poll, so shutdown always runs the same clean path."""
 
@@ -172,8 +177,7 @@ class Run:
 
         torch.set_num_threads(learner_threads(self.cfg))
         snapshot = self.replay_to_restore()
-        # a saved replay holds its demonstrations already
-        demos = None if snapshot else run_demos(self.cfg, self.progress)
+        demos = None if snapshot else self.plan_demos()   # a saved replay holds them already
         self.ctx = RunContext(self.cfg, demo_streams(snapshot) if snapshot else
                               demos.streams if demos else 0)
         code = EXIT_OK
@@ -206,6 +210,20 @@ class Run:
             finally:  # even when a Ctrl-C cuts the replay's saving short: no segment outlives it
                 self.ctx.close()
         return self.summary(code)
+
+    def plan_demos(self) -> DemoSet | None:
+        """The run's demonstrations, planned before anything is allocated: a signal meanwhile
+        stops the run at once, with nothing to clean up or save."""
+        def stop(signum, frame):
+            raise NothingTrained(f"stopped by {signal.Signals(signum).name} while the expert "
+                                 "planned the demonstrations; nothing was trained")
+
+        old = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            return run_demos(self.cfg, self.progress)
+        finally:
+            for sig, handler in old.items():
+                signal.signal(sig, handler)
 
     def replay_to_restore(self) -> str | None:
         """The saved replay a resumed run reads back, if it has one."""
