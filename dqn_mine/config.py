@@ -72,7 +72,7 @@ class Config:
     held_on_top: bool = _f(False, "draw the carried item over the world (else a near wall or a "
                            "faced item hides it, and holding a boulder in front of another looks "
                            "like holding nothing); training and evaluation alike")
-    curriculum: str = _f("none", "adaptive: phases 6->1 (three-room and two-room), one "
+    curriculum: str = _f("none", "adaptive: phases 6->1 (three-room), one "
                          "harder when the rolling return passes the threshold; schedule: room "
                          "counts by share of updates; backward "
                          "(every task): start on the expert's solution of each episode, d "
@@ -103,7 +103,7 @@ class Config:
                               "and near it cleared (from room 0 also with the doorway beyond "
                               "cleared) inserted before each phase that must "
                               "clear it, and near and facing the kit before the first that must "
-                              "take it (two-room's phases have some)")
+                              "take it")
     rooms_schedule: tuple[int, ...] = _f((3, 4, 5), "room counts of the schedule curriculum, each "
                                          "for an equal share of the updates")
     # -- actors ------------------------------------------------------------------------------
@@ -508,9 +508,8 @@ def _task_problems(c: Config) -> list[str]:
     if c.curriculum in PHASED_CURRICULA and c.placement != "fixed":
         p.append(f"--curriculum {c.curriculum} sets the start of each episode, so it needs "
                  "--placement fixed")
-    if c.curriculum in PHASED_CURRICULA and c.task not in ("two-room", "three-room"):
-        p.append(f"--curriculum {c.curriculum} needs --task two-room or three-room, "
-                 f"got {c.task}")
+    if c.curriculum in PHASED_CURRICULA and c.task != "three-room":
+        p.append(f"--curriculum {c.curriculum} needs --task three-room, got {c.task}")
     if c.boulder_phases and (c.task != "three-room" or c.curriculum not in PHASED_CURRICULA):
         p.append("--boulder-phases applies to --task three-room --curriculum adaptive only")
     if c.curriculum == "schedule" and (c.task != "rooms" or not c.rooms_schedule

@@ -194,7 +194,7 @@ def add_episode_arguments(ap: argparse.ArgumentParser, defaults: dict | None = N
     ap.add_argument("--room-size", type=float, default=None, help="side of each room in units")
     ap.add_argument("--placement", default=None, help="fixed or any-room (domain randomisation)")
     ap.add_argument("--phase", type=int, default=None,
-                    help="curriculum phase: 1..6 of three-room and of two-room")
+                    help="curriculum phase: 1..6 of three-room")
     ap.add_argument("--boulder-phases", action="store_true",
                     help="three-room: --phase counts the twenty-three boulder phases (as train's)")
     ap.add_argument("--visual-randomisation", action="store_true",

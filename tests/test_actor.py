@@ -142,7 +142,7 @@ def test_actor_starts_episodes_in_the_shared_phase_and_records_them():
     environment really stops there, and the episode record says so."""
     cfg = dataclasses.replace(Config(**PRESETS["cpu"], preset="cpu"), actors=1,
                               envs_per_actor=2, replay_capacity=4096, eval_every=0,
-                              curriculum="adaptive", max_episode_steps=25,
+                              task="three-room", curriculum="adaptive", max_episode_steps=25,
                               curriculum_review=0.0).validate()
     net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
     with in_process_actor(cfg, net, phase=6) as actor:
@@ -172,8 +172,8 @@ def test_actor_counts_the_steps_of_its_finished_episodes_for_review_by_steps():
     of the review episodes (started in a phase easier than the shared one)."""
     cfg = dataclasses.replace(Config(**PRESETS["cpu"], preset="cpu"), actors=1,
                               envs_per_actor=4, replay_capacity=4096, eval_every=0,
-                              curriculum="adaptive", max_episode_steps=20, curriculum_review=0.5,
-                              curriculum_review_unit="steps").validate()
+                              task="three-room", curriculum="adaptive", max_episode_steps=20,
+                              curriculum_review=0.5, curriculum_review_unit="steps").validate()
     net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
     with in_process_actor(cfg, net, phase=4) as actor:
         for _ in range(80):

@@ -82,8 +82,8 @@ def test_optional_env_settings_are_passed_only_when_on():
 
 
 def test_low_epsilon_return_counts_only_the_near_greedy_episodes_of_the_phase():
-    cfg = parse_args(["--curriculum", "adaptive", "--curriculum-window", "4",
-                      "--curriculum-threshold", "0.4"])             # two-room: starts at 6
+    cfg = parse_args(["--task", "three-room", "--curriculum", "adaptive",
+                      "--curriculum-window", "4", "--curriculum-threshold", "0.4"])   # at 6
     cur = Curriculum(cfg)
     assert math.isnan(cur.phase_low_eps_return)
     cur.record(6, 1.0, epsilon=0.4)      # an exploring env's success
@@ -99,8 +99,8 @@ def test_low_epsilon_return_counts_only_the_near_greedy_episodes_of_the_phase():
 def test_the_scripted_prefill_walkers_episodes_do_not_advance_the_curriculum():
     from dqn_mine.agent.explore import SCRIPTED_EPSILON
 
-    cfg = parse_args(["--curriculum", "adaptive", "--curriculum-window", "2",
-                      "--curriculum-threshold", "0.4"])             # two-room: starts at 6
+    cfg = parse_args(["--task", "three-room", "--curriculum", "adaptive",
+                      "--curriculum-window", "2", "--curriculum-threshold", "0.4"])   # at 6
     cur = Curriculum(cfg)
     for _ in range(4):
         cur.record(6, 1.0, epsilon=SCRIPTED_EPSILON)   # the walker delivers: not the agent
@@ -113,8 +113,8 @@ def test_the_scripted_prefill_walkers_episodes_do_not_advance_the_curriculum():
 
 
 def test_adaptive_curriculum_stops_at_the_full_task_and_resumes_where_it_was():
-    cfg = parse_args(["--curriculum", "adaptive", "--curriculum-window", "1",
-                      "--curriculum-threshold", "-1"])              # two-room: phases 6..1
+    cfg = parse_args(["--task", "three-room", "--curriculum", "adaptive",
+                      "--curriculum-window", "1", "--curriculum-threshold", "-1"])   # 6..1
     cur = Curriculum(cfg)
     seen = []
     for _ in range(8):
@@ -143,13 +143,38 @@ def test_episode_start_tells_the_environment_what_to_set():
     import numpy as np
 
     rng = np.random.default_rng(0)
-    adaptive = Curriculum(parse_args(["--curriculum", "adaptive"]))
+    adaptive = Curriculum(parse_args(["--task", "three-room", "--curriculum", "adaptive"]))
     assert adaptive.episode_start(3, 0, rng) == (3, {"phase": 3})
     rooms = Curriculum(parse_args(["--task", "rooms", "--curriculum", "schedule"]))
     assert rooms.episode_start(0, 4, rng) == (0, {"num_rooms": 4})
     plain = Curriculum(parse_args([]))
     assert plain.episode_start(0, 0, rng) == (0, {}) and plain.phase == 0
     assert plain.num_rooms is None
+
+
+def test_two_room_has_no_curriculum_phases():
+    """Its six-phase table was removed (the backward curriculum beat it): a phase other than 1
+    (its full task) and the adaptive curriculum on it are one-line errors."""
+    import numpy as np
+
+    from dqn_mine.config import ConfigError
+    from dqn_mine.env import MineRescueEnv
+
+    full, one = MineRescueEnv(task="two-room"), MineRescueEnv(task="two-room", phase=1)
+    try:
+        (obs, info), (obs1, info1) = full.reset(seed=4), one.reset(seed=4)
+        assert np.array_equal(obs, obs1) and info == info1 and info["agent_room"] == 0
+    finally:
+        full.close()
+        one.close()
+
+    with pytest.raises(ValueError) as env_error:
+        MineRescueEnv(task="two-room", phase=3)
+    with pytest.raises(ConfigError) as config_error:
+        parse_args(["--task", "two-room", "--curriculum", "adaptive"])
+    for error in (env_error, config_error):
+        message = str(error.value)
+        assert "three-room" in message and "two-room" in message and "\n" not in message
 
 
 # -- through real runs -------------------------------------------------------------------------
@@ -167,7 +192,8 @@ def test_phases_advance_through_shared_state(tmp_path):
 def test_review_starts_a_share_of_episodes_in_easier_phases():
     import numpy as np
 
-    cfg = parse_args(["--curriculum", "adaptive", "--curriculum-review", "0.3"])   # two-room
+    cfg = parse_args(["--task", "three-room", "--curriculum", "adaptive",
+                      "--curriculum-review", "0.3"])
     rng = np.random.default_rng(0)
     drawn = np.array([Curriculum(cfg).review_phase(4, rng) for _ in range(20_000)])
     shares = [np.mean(drawn == p) for p in (1, 2, 3, 4, 5, 6)]
@@ -175,20 +201,20 @@ def test_review_starts_a_share_of_episodes_in_easier_phases():
     assert abs(shares[4] - 0.15) < 0.01 and abs(shares[5] - 0.15) < 0.01
     # nothing easier to review
     assert {Curriculum(cfg).review_phase(6, rng) for _ in range(100)} == {6}
-    study = parse_args(["--curriculum", "adaptive"])
+    study = parse_args(["--task", "three-room", "--curriculum", "adaptive"])
     state = rng.bit_generator.state
     assert {Curriculum(study).review_phase(2, rng) for _ in range(100)} == {2}
     assert rng.bit_generator.state == state, "without review no random number is drawn"
 
 
 def _review_share(unit: str, current_steps: int, review_steps: int) -> tuple[float, float]:
-    """One actor's episodes in phase 2 of two-room with half of them (or half of the steps)
+    """One actor's episodes in phase 2 of three-room with half of them (or half of the steps)
     reviewing: current-phase episodes fail at ``current_steps``, reviewed ones succeed in
     ``review_steps``. Returns (share of episodes, share of steps) that reviewed."""
     import numpy as np
 
-    cfg = parse_args(["--curriculum", "adaptive", "--curriculum-review", "0.5",
-                      "--curriculum-review-unit", unit])
+    cfg = parse_args(["--task", "three-room", "--curriculum", "adaptive",
+                      "--curriculum-review", "0.5", "--curriculum-review-unit", unit])
     cur, rng = Curriculum(cfg), np.random.default_rng(0)
     episodes, steps = [], []
     for _ in range(2_000):
@@ -202,8 +228,8 @@ def _review_share(unit: str, current_steps: int, review_steps: int) -> tuple[flo
 
 
 def test_review_by_steps_gives_passed_phases_that_share_of_the_steps():
-    """A new phase's failures run to the step limit, a passed phase's successes are short: by
-    episodes half the episodes are only ~9% of the steps; by steps, half the steps."""
+    """A new phase's failures run long (here 1,000 steps), a passed phase's successes are short:
+    by episodes half the episodes are only ~9% of the steps; by steps, half the steps."""
     by_episodes = _review_share("episodes", current_steps=1000, review_steps=100)
     assert abs(by_episodes[0] - 0.5) < 0.04 and abs(by_episodes[1] - 100 / 1100) < 0.02
     by_steps = _review_share("steps", current_steps=1000, review_steps=100)
@@ -215,8 +241,8 @@ def test_review_by_steps_gives_passed_phases_that_share_of_the_steps():
 def test_review_by_steps_counts_from_the_last_phase_switch():
     import numpy as np
 
-    cfg = parse_args(["--curriculum", "adaptive", "--curriculum-review", "0.5",
-                      "--curriculum-review-unit", "steps"])
+    cfg = parse_args(["--task", "three-room", "--curriculum", "adaptive",
+                      "--curriculum-review", "0.5", "--curriculum-review-unit", "steps"])
     cur, rng = Curriculum(cfg), np.random.default_rng(0)
     state = rng.bit_generator.state
     assert cur.episode_start(6, 0, rng)[0] == 6      # the easiest phase: nothing to review
@@ -275,8 +301,8 @@ def test_evaluation_actor_runs_the_full_target_task():
     adaptive = parse_args(["--task", "three-room", "--curriculum", "adaptive",
                            "--eval-every", "1000"])
     assert Curriculum(adaptive).phase == 6 and actor_specs(adaptive)[-1].evaluates
-    two = parse_args(["--curriculum", "adaptive", "--eval-every", "1000"])   # two-room
-    assert Curriculum(two).phase == 6 and eval_env_kwargs(two)["task"] == "two-room"
+    assert eval_env_kwargs(adaptive)["task"] == "three-room" and "phase" not in \
+        eval_env_kwargs(adaptive)
     rooms = parse_args(["--task", "rooms", "--curriculum", "schedule", "--rooms-schedule", "3", "4",
                         "5", "--eval-every", "1000"])
     assert eval_env_kwargs(rooms)["num_rooms"] == 5 and Curriculum(rooms).num_rooms == 3

@@ -9,7 +9,7 @@ import pytest
 
 from dqn_mine.env import MineRescueEnv
 from dqn_mine.env.entities import BOULDER
-from dqn_mine.env.tasks import PHASES, THREE_ROOM_BOULDER_PHASES, TWO_ROOM_PHASES, phase_table
+from dqn_mine.env.tasks import PHASES, THREE_ROOM_BOULDER_PHASES, phase_table
 from tests.env_configs import TASK_CONFIGS, ids
 
 SOLVE_CONFIGS = TASK_CONFIGS + [
@@ -67,9 +67,8 @@ def test_expert_solves_nearly_all_of_100_episodes(config):
 
 # (task, boulder phases, phase, kit room, miner room) for every curriculum phase
 PHASE_CASES = [("three-room", False, p, 2, 0) for p in sorted(PHASES)] + \
-    [("three-room", True, p, 2, 0) for p in sorted(THREE_ROOM_BOULDER_PHASES)] + \
-    [("two-room", False, p, 1, 1) for p in sorted(TWO_ROOM_PHASES)]
-PHASE_TABLES = [("two-room", False), ("three-room", False), ("three-room", True)]
+    [("three-room", True, p, 2, 0) for p in sorted(THREE_ROOM_BOULDER_PHASES)]
+PHASE_TABLES = [("three-room", False), ("three-room", True)]
 
 
 @pytest.mark.parametrize("task, boulder, phase, kit_room, miner_room", PHASE_CASES,

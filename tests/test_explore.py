@@ -265,7 +265,7 @@ def test_cpu_preset_is_the_full_two_room_task():
 def test_a_kit_held_from_the_start_counts_as_picked_up_only_when_taken_again():
     from dqn_mine.bench.explore import _Tracker
 
-    env = MineRescueEnv(task="two-room", phase=6)     # starts carrying the kit
+    env = MineRescueEnv(task="three-room", phase=6)   # starts carrying the kit
     for seed in range(10):
         _, info = env.reset(seed=seed)
         tracker = _Tracker(env, info)

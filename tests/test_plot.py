@@ -64,8 +64,8 @@ def test_milestones_count_full_task_windows_only(tmp_path, capsys):
     from dqn_mine.config import parse_args
     from dqn_mine.plot import milestones
 
-    cfg = parse_args(["--curriculum", "adaptive", "--curriculum-window", "10",
-                      "--curriculum-review", "0.5"])
+    cfg = parse_args(["--task", "three-room", "--curriculum", "adaptive",
+                      "--curriculum-window", "10", "--curriculum-review", "0.5"])
     # (phase, episodes so far, phase_return): phase 2 at 0.95; phase 1 from 100 episodes on,
     # its window full from 120 (20 episodes x 0.5 share)
     table = [(2, 50, 0.95), (1, 100, 0.0), (1, 110, 1.0), (1, 120, 0.55), (1, 140, 0.7),
@@ -81,7 +81,8 @@ def test_milestones_count_full_task_windows_only(tmp_path, capsys):
     # the command line reads each run's config.json
     run_dir = write_metrics(tmp_path / "run", rows)
     (run_dir / "config.json").write_text(json.dumps(
-        {"curriculum": "adaptive", "curriculum_window": 10, "curriculum_review": 0.5}))
+        {"task": "three-room", "curriculum": "adaptive", "curriculum_window": 10,
+         "curriculum_review": 0.5}))
     assert main([str(run_dir), "--milestones", "0.5", "0.9"]) == 0
     out = capsys.readouterr().out
     assert "| run | 400, 4.0 | 600, 6.0 | 0.85 |" in out
@@ -124,7 +125,8 @@ def test_band_plot_of_seeds_writes_a_png(tmp_path):
     runs = []
     for seed, phases in enumerate(([3, 2, 1, 1, 1, 1, 1, 1], [2, 2, 2, 1, 1, 1, 1, 1])):
         run = fake_run(tmp_path / f"seed{seed}", phases)
-        (run / "config.json").write_text(json.dumps({"curriculum": "adaptive",
+        (run / "config.json").write_text(json.dumps({"task": "three-room",
+                                                     "curriculum": "adaptive",
                                                      "curriculum_window": 1}))
         runs.append(str(run))
     assert main([*runs, "--band", "--out", str(tmp_path / "band.png")]) == 0

@@ -5,7 +5,7 @@ one command on a GPU machine, in about 8 minutes, with every figure in one folde
 2. NVIDIA EGL rendering in spawned processes: the renderer's name, and steps/s of the study's
    task with 1, 7 and 15 processes at once;
 3. the whole system with the learner on CUDA: transitions/s and updates/s with 7 and 15 actors;
-4. a 5-minute `two-room` learning run (15 actors, the two-room curriculum): its metrics, a
+4. a 5-minute `two-room` learning run (`--preset cpu` with 15 actors): its metrics, a
    plot and its summary.
 
 DIR gets `summary.md` (the tables), `gpu_check.json` (the same figures), `learning.csv`,

@@ -11,8 +11,8 @@
 uniformly random room; the family still contains the fixed task. For ``rooms`` both placements
 are the same. Rooms are numbered in the order they were placed (the chain order for three-room).
 
-Curriculum phases of ``three-room`` (1 is the full task; the study trained 6 first); ``two-room``
-has phases 1-6 built the same way (see ``TWO_ROOM_PHASES`` and below):
+Curriculum phases of ``three-room`` (1 is the full task; the study trained 6 first; the other
+tasks have none):
 
 | phase | start                                                              |
 |-------|--------------------------------------------------------------------|
@@ -22,10 +22,6 @@ has phases 1-6 built the same way (see ``TWO_ROOM_PHASES`` and below):
 | 4     | agent in room 2 carrying the kit; both boulders moved aside        |
 | 5     | agent in room 1 carrying the kit; both boulders moved aside        |
 | 6     | agent in room 0 (with the miner) carrying the kit; both aside      |
-
-``two-room``: 1 the full task; 2 the agent 2-4 units from the boulder in the doorway; 3 the agent
-in room 0 holding that boulder; 4 the doorway cleared; 5 the agent in room 1 (the one-room problem
-there); 6 the agent in room 1 carrying the kit.
 
 ``three-room`` with ``boulder_phases=True`` (twenty-three phases, the study's six renumbered 23,
 22, 21, 18, 10, 1): 1 the full task; 2 the agent in room 0, 2-4 units from the boulder of doorway
@@ -75,20 +71,6 @@ PHASES = {
     5: Phase(1, 2, True),
     6: Phase(0, 2, True),
 }
-# The same reverse curriculum for two-room (kit and miner both in room 1): 6 is carrying the kit
-# in the miner's room, 5 the one-room problem in that room, 4 the full task with the doorway
-# already cleared, 3 with the doorway's boulder already in hand, 2 a few steps from the blocked
-# doorway, 1 the full task. Phases 3 and 2 exist because the step from 4 to 1 was the wall: with
-# the boulder in hand the agent did not go on to the kit, and it never walked up to a doorway
-# that a boulder blocked (it had only seen open ones); see docs/exploration.md.
-TWO_ROOM_PHASES = {
-    1: Phase(0, 0, False),
-    2: Phase(0, 0, False, near_boulder=True),
-    3: Phase(0, 0, False, holding_boulder=True),
-    4: Phase(0, 1, False),
-    5: Phase(1, 1, False),
-    6: Phase(1, 1, True),
-}
 # three-room with ``boulder_phases=True``: the study's six phases (here 23, 22, 21, 18, 10, 1) with
 # seven steps inserted before each phase that must clear a doorway (the boulder in hand one room
 # further on, the doorway cleared, the same a few steps from it, its boulder in hand there and
@@ -128,21 +110,20 @@ NEAR_BOULDER = (2.0, 4.0)   # distance of the agent from the boulder (or kit) it
 # where the floor in view begins beyond it).
 KIT_FACING_DISTANCE = 1.75
 FULL_TASK = PHASES[1]        # phase 1 of every table: no boulder moved, no item in hand
-TASK_PHASES = {"two-room": TWO_ROOM_PHASES, "three-room": PHASES}
+TASK_PHASES = {"three-room": PHASES}
 BOULDER_PHASES = {"three-room": THREE_ROOM_BOULDER_PHASES}
 
 
 def phase_table(task: str, boulder_phases: bool = False) -> dict[int, Phase]:
     """The curriculum phases of ``task`` (1 = the full task); ``boulder_phases`` picks the
     finer table of a task that has one (three-room)."""
-    if task not in TASK_PHASES:
-        raise ValueError(f"curriculum phases exist only for tasks 'two-room' and 'three-room', "
-                         f"not {task!r}")
     if boulder_phases:
         if task not in BOULDER_PHASES:
-            raise ValueError(f"boulder_phases applies to {', '.join(BOULDER_PHASES)} only "
-                             f"({task!r} has its boulder phases already)")
+            raise ValueError(f"boulder_phases applies to {', '.join(BOULDER_PHASES)} only, "
+                             f"not {task!r}")
         return BOULDER_PHASES[task]
+    if task not in TASK_PHASES:
+        raise ValueError(f"curriculum phases exist only for task 'three-room', not {task!r}")
     return TASK_PHASES[task]
 
 
@@ -246,9 +227,9 @@ class MineRescueEnv(MineEnv):
         room_size: side of each square room in units (>= 8).
         max_episode_steps: step limit; None means the task's default.
         placement: "fixed" or "any-room" (domain randomisation of the start rooms).
-        phase: curriculum phase 1..6 of ``three-room`` or 1..6 of ``two-room`` (1 = the full
-            task), or None.
-        boulder_phases: ``three-room`` only: phases 1..22, the study's six with starts near
+        phase: curriculum phase 1..6 of ``three-room`` (1 = the full task), or None; the other
+            tasks have no phases (``two-room`` still accepts 1, its full task).
+        boulder_phases: ``three-room`` only: phases 1..23, the study's six with starts near
             each blocked doorway, facing its boulder, holding it (anywhere in its room, near its
             doorway, and in the next room), with it cleared (anywhere and near it), and near
             and facing the kit inserted (see ``phase_table``).
@@ -326,10 +307,13 @@ def _check_rooms(spec: Task, num_rooms) -> int:
 def _check_phase(task: str, placement: str, phase, boulder_phases: bool) -> int | None:
     if phase is None:
         return None
-    phases = phase_table(task, boulder_phases)
-    if not _is_int(phase) or phase not in phases:
-        raise ValueError(f"phase must be an integer in 1..{len(phases)} or None for {task!r}, "
-                         f"got {phase!r}")
+    # two-room's phase table is gone (the backward curriculum replaced it); its phase 1, the full
+    # task, is still accepted as before
+    if not (task == "two-room" and _is_int(phase) and phase == 1):
+        phases = phase_table(task, boulder_phases)   # raises for a task without phases
+        if not _is_int(phase) or phase not in phases:
+            raise ValueError(f"phase must be an integer in 1..{len(phases)} or None for "
+                             f"{task!r}, got {phase!r}")
     if placement != "fixed":
         raise ValueError("curriculum phases need placement='fixed'")
     return int(phase)

@@ -2,7 +2,7 @@
 
 The kinds (``--curriculum``):
 
-- ``adaptive`` (two-room and three-room): ``phase`` runs from the task's easiest phase down to 1,
+- ``adaptive`` (three-room): ``phase`` runs from the task's easiest phase down to 1,
   the full task. It moves one phase harder once the mean return of the last ``window`` episodes,
   all started in the current phase, exceeds ``threshold``. With ``review`` > 0 a share of the
   episodes starts in an easier phase already passed (see :meth:`Curriculum.review_phase`);
