@@ -11,9 +11,9 @@ def load_agent(path, epsilon: float = 0.0, seed: int = 0, unstick: bool = False,
                held: bool = False):
     """A trained agent from a run folder or ``checkpoint.pt``: ``agent.predict(obs, info)`` gives
     an action, ``agent.reset()`` starts an episode. ``unstick``: a random action after a step
-    that left the frame unchanged (or, with the run's ``--unstick-cycle`` k, brought back one of
-    the last k frames), as the training actors of ``--unstick`` act. ``held``: random actions
-    (epsilon's and unstick's) held for the run's ez durations, as its training actors hold them.
+    that left the frame unchanged (or, with the run's ``--unstick k``, brought back one of the
+    last k frames), as the run's training actors act. ``held``: random actions (epsilon's and
+    unstick's) held for ez durations, as ez training actors hold them.
     A missing or corrupt checkpoint raises ``CheckpointError`` (a ValueError) with a one-line
     message."""
     from dqn_mine.agent.policy import AgentPolicy

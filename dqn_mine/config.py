@@ -22,16 +22,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
-from dqn_mine.env.mine import MAX_CAMERA_PITCH
+from dqn_mine.env.mine import VIEWS
 from dqn_mine.env.tasks import DEFAULT_NUM_ROOMS, MAX_ROOMS, PLACEMENTS, TASKS
 from dqn_mine.replay.writer import FLUSH_EVERY
 
 DEVICES = ("auto", "cpu", "cuda")
-ACTOR_PRECISIONS = ("auto", "float32", "bfloat16")
-LEARNER_PRECISIONS = ACTOR_PRECISIONS   # auto, or a dtype by name
+PRECISIONS = ("auto", "float32", "bfloat16")
 EPSILON_SCHEDULES = ("fixed", "apex")
-CURRICULA = ("none", "adaptive", "schedule", "backward")
-PHASED_CURRICULA = ("adaptive",)   # those that start episodes in phases
+CURRICULA = ("none", "adaptive", "boulders", "schedule", "backward")
+PHASED_CURRICULA = ("adaptive", "boulders")   # those that start episodes in phases
 EXPLORATIONS = ("epsilon", "ez")
 PREFILL_EXPLORERS = ("agent", "bump-and-press")
 REVIEW_UNITS = ("episodes", "steps")
@@ -62,23 +61,18 @@ class Config:
     max_episode_steps: Optional[int] = _f(None, "episode step limit (none = the task's default)")
     placement: str = _f("fixed", "where agent, kit and miner start (any-room = domain "
                         "randomisation)", PLACEMENTS)
-    visual_randomisation: bool = _f(False, "draw light, wall colour and field of view anew each "
-                                    "episode (training actors only)")
-    room_colours: bool = _f(False, "each room's floor in a colour of its own (rooms told apart "
-                            "by sight, also through a doorway); training and evaluation alike")
-    camera_pitch: float = _f(0.0, "degrees the camera looks down, 0..30 (0 = level, as "
-                             "MiniWorld's; at 15 an item within reach of action 4 stays in "
-                             "view); training and evaluation alike")
-    held_on_top: bool = _f(False, "draw the carried item over the world (else a near wall or a "
-                           "faced item hides it, and holding a boulder in front of another looks "
-                           "like holding nothing); training and evaluation alike")
-    curriculum: str = _f("none", "adaptive: phases 6->1 (three-room), one "
-                         "harder when the rolling return passes the threshold; schedule: room "
-                         "counts by share of updates; backward "
-                         "(every task): start on the expert's solution of each episode, d "
-                         "steps before its delivery, d growing by --backward-step as the agent "
-                         "succeeds",
-                         CURRICULA)
+    view: str = _f("study", "study: a level camera, plain floors, the carried item drawn in the "
+                   "world; clear: the camera pitched 15 degrees down (an item within reach stays "
+                   "in view), each room's floor in a colour of its own, the carried item drawn "
+                   "on top (training and evaluation alike)", tuple(VIEWS))
+    # -- curriculum ----------------------------------------------------------------------------
+    curriculum: str = _f("none", "adaptive: three-room's phases 6->1, one harder when the "
+                         "rolling return passes the threshold; boulders: the same through "
+                         "three-room's 23 phases (starts near, facing and holding each "
+                         "doorway's boulder, and with it cleared, inserted); schedule: room "
+                         "counts by share of updates; backward (every task): start on the "
+                         "expert's solution of each episode, d steps before its delivery, d "
+                         "growing by --backward-step as the agent succeeds", CURRICULA)
     backward_step: int = _f(10, "backward curriculum: expert steps the start moves back at "
                             "once, and the width of the frontier the starts are drawn from")
     curriculum_threshold: float = _f(0.6, "rolling mean return that advances a curriculum phase")
@@ -97,32 +91,21 @@ class Config:
                               "episodes that start as the full task with --placement any-room's "
                               "random rooms instead of in a phase (they do not count towards "
                               "the phase's switch)")
-    boulder_phases: bool = _f(False, "three-room curriculum: 23 phases, starts near each "
-                              "blocked doorway, facing its boulder, holding it (anywhere in its "
-                              "room, near the doorway, and in the next room), with it cleared, "
-                              "and near it cleared (from room 0 also with the doorway beyond "
-                              "cleared) inserted before each phase that must "
-                              "clear it, and near and facing the kit before the first that must "
-                              "take it")
     rooms_schedule: tuple[int, ...] = _f((3, 4, 5), "room counts of the schedule curriculum, each "
                                          "for an equal share of the updates")
-    # -- actors ------------------------------------------------------------------------------
+    # -- actors and exploration ---------------------------------------------------------------
     actors: int = _f(7, "number of actor processes")
     envs_per_actor: int = _f(1, "environments per actor, stepped with one batched forward pass")
     epsilon: float = _f(0.01, "exploration rate of every actor (fixed schedule)")
     epsilon_schedule: str = _f("fixed", "fixed: every actor uses --epsilon; apex: env i of the "
                                "N actor envs uses 0.4**(1+7i/(N-1))", EPSILON_SCHEDULES)
     exploration: str = _f("epsilon", "epsilon: a uniform random action with prob. epsilon; ez: "
-                          "with prob. epsilon start a random action held for a zeta-distributed "
-                          "duration (motions only)", EXPLORATIONS)
-    unstick: bool = _f(False, "a step after which the frame did not change is followed by a "
-                       "random action, as if epsilon had fired (training actors only)")
-    unstick_cycle: int = _f(1, "with --unstick (and --eval-unstick): a step counts as stuck "
-                            "when its frame is one of the last N frames (1: the frame did not "
-                            "change; 2: also a frame two steps back came back, as when the "
-                            "agent puts a boulder down and takes it up again)")
-    ez_mu: float = _f(2.0, "ez exploration: durations n drawn with p(n) ~ n**-mu")
-    ez_max_duration: int = _f(100, "ez exploration: longest duration of a held random action")
+                          "with prob. epsilon start a random action held for n steps, p(n) ~ "
+                          "n**-2 up to 100 (motions only)", EXPLORATIONS)
+    unstick: int = _f(0, "training actors: a step whose frame is one of the last N frames (1: "
+                      "the view did not change; 2: also the frame two steps back came back, as "
+                      "when a boulder is put down and taken up again) is followed by a random "
+                      "action, as if epsilon had fired (0 = off)")
     prefill: int = _f(50_000, "environment steps per actor before the learner starts")
     # The study does not say how its pre-fill acted. A fresh network at epsilon 0.01 records
     # no reward in the study's 350 pre-fill episodes of two-room (it stops at the first wall);
@@ -131,10 +114,6 @@ class Config:
                                "(a scripted walker: straight ahead until the view stops "
                                "changing, then action 4 and a turn away) or agent (the actors' "
                                "own exploration)", PREFILL_EXPLORERS)
-    actor_precision: str = _f("auto", "actors' convolutions and first head layers: bfloat16 "
-                              "(faster where the CPU computes it natively; the output layers "
-                              "stay float32), float32, or auto (bfloat16 where native and "
-                              "--envs-per-actor >= 8)", ACTOR_PRECISIONS)
     # -- learner -----------------------------------------------------------------------------
     updates: int = _f(1_000_000, "network updates to train for")
     minutes: Optional[float] = _f(None, "also stop, as finished, after this many minutes of wall "
@@ -143,32 +122,28 @@ class Config:
     batch_size: int = _f(32, "transitions per update")
     gamma: float = _f(0.99, "discount factor")
     n_step: int = _f(6, "steps of the n-step return")
-    # The study does not state C or any clipping: both defaults are Ape-X's (Horgan et al. 2018).
-    # With Huber loss and IS weights <= 1, dLoss/dQ is bounded per sample, so a norm-40 clip
-    # rarely binds; it guards against rare spikes (e.g. right after a target sync) at no cost.
+    # The study does not state C: Ape-X's (Horgan et al. 2018), as is the gradient clip
+    # (system/learner.py).
     target_update_interval: int = _f(2500, "updates between target network syncs (Ape-X value)")
-    max_grad_norm: Optional[float] = _f(40.0, "clip the global gradient norm (none or 0 = off; "
-                                        "Ape-X value)")
     publish_interval: int = _f(500, "updates between weight broadcasts to the actors")
     replay_ratio: Optional[float] = _f(None, "hold updates per new transition fixed by "
                                        "throttling (none = free-running)")
-    learner_queue: int = _f(4, "ready batches the background sampler keeps on the device")
-    learner_threads: int = _f(0, "torch threads of the learner (0 = cores the acting processes "
-                              "leave free, at least 1)")
     device: str = _f("auto", "learner device (auto = cuda when available)", DEVICES)
-    learner_precision: str = _f("auto", "learner compute: float32, or bfloat16 (convolutions "
-                                "and first head layers; float32 master weights, outputs, loss "
-                                "and Adam), or auto (bfloat16 where the CPU or GPU computes it "
-                                "natively)", LEARNER_PRECISIONS)
+    precision: str = _f("auto", "compute of the convolutions and first head layers, learner and "
+                        "actors: float32, or bfloat16 (float32 master weights, outputs, loss and "
+                        "Adam), or auto (bfloat16 where the CPU or GPU computes it natively; "
+                        "actors only with --envs-per-actor >= 8)", PRECISIONS)
     # -- network -----------------------------------------------------------------------------
     history_len: int = _f(20, "actions in the one-hot action history input (0 = none)")
     frame_stack: int = _f(1, "frames stacked along channels (1 = no stacking)")
     # -- replay ------------------------------------------------------------------------------
     replay_capacity: int = _f(1_048_576, "transitions the replay holds (oldest overwritten)")
-    zeta: float = _f(0.6, "priority exponent: P(i) ~ p_i**zeta")
-    beta0: float = _f(0.4, "initial importance-sampling exponent, annealed to 1")
-    eta: float = _f(1e-5, "added to |TD error| so no priority is zero")
-    # DQfD (Hester et al. 2018): its margin, loss weight and priority bonus are the defaults.
+    zeta: float = _f(0.6, "priority exponent: P(i) ~ p_i**zeta (beta 0.4 -> 1 and eta 1e-5 "
+                     "as the study's)")
+    save_replay: Optional[str] = _f(None, "also save the replay to this folder at the end "
+                                    "(large; size printed first); --resume reads it back and "
+                                    "skips the pre-fill")
+    # -- demonstrations: DQfD (Hester et al. 2018); its margin, loss weight and bonus ----------
     demos: int = _f(0, "expert episodes played before acting and kept in the replay for the "
                     "whole run, never overwritten (DQfD demonstrations; 0 = none)")
     demos_from: Optional[str] = _f(None, "a folder of recorded demonstrations to keep instead "
@@ -179,24 +154,13 @@ class Config:
     demo_loss_weight: float = _f(1.0, "weight of the large-margin loss on demonstrations "
                                  "(0 = off)")
     demo_pretrain: int = _f(0, "updates on the demonstrations alone before the actors start")
-    save_replay: Optional[str] = _f(None, "also save the replay to this folder at the end "
-                                    "(large; size printed first); --resume reads it back and "
-                                    "skips the pre-fill")
     # -- evaluation --------------------------------------------------------------------------
-    eval_every: int = _f(0, "evaluation actor: evaluate every N training env steps (0 = off)")
+    eval_every: int = _f(0, "evaluation actor: every N training env steps, play the full task "
+                         "near-greedily (epsilon 0.01, no held or unstick actions; a GIF every "
+                         "10th time) (0 = off)")
     eval_episodes: int = _f(10, "episodes per evaluation")
-    eval_task: Optional[str] = _f(None, "task of the evaluation actor (none = --task, full "
-                                  "problem)")
     eval_num_rooms: Optional[int] = _f(None, "rooms of the evaluation actor's rooms task (none "
                                        "= --num-rooms, or the schedule's last count)")
-    eval_epsilon: float = _f(0.01, "exploration rate of the evaluation actor")
-    eval_unstick: bool = _f(False, "the evaluation actor also takes a random action after a "
-                            "step that left the frame unchanged (as --unstick)")
-    eval_held: bool = _f(False, "the evaluation actor holds its random actions (epsilon's and "
-                         "--eval-unstick's) as the ez training actors do: it plays the policy "
-                         "of a training actor at --eval-epsilon (needs --exploration ez)")
-    eval_video_every: int = _f(10, "save a GIF of one evaluation episode every N evaluations "
-                               "(0 = never)")
     # -- run ---------------------------------------------------------------------------------
     seed: int = _f(0, "random seed")
     preset: str = _f("paper", "named configuration the flags start from (see below; why "
@@ -206,9 +170,7 @@ class Config:
     checkpoint_interval: int = _f(50_000, "updates between checkpoints (one is always written "
                                   "at the end)")
     log_interval: int = _f(1000, "updates between rows of metrics.csv")
-    return_window: int = _f(100, "finished episodes in the rolling mean return and length")
     serial: bool = _f(False, "run actors and learner in one process (tests, debugging)")
-    progress: bool = _f(True, "show the progress bar")
     tensorboard: bool = _f(False, "also write every metrics row to TensorBoard event files in "
                            "RUN_DIR/tb (needs the tensorboard package: pip install -e .[tb])")
 
@@ -297,7 +259,7 @@ class Config:
 # -- saved configs of older versions -----------------------------------------------------------
 # config.json and every checkpoint carry VERSION_KEY; a config without it is version 1.
 VERSION_KEY = "config_version"
-CONFIG_VERSION = 2
+CONFIG_VERSION = 3
 # Settings version 2 removed (measured and rejected, or used by no preset), with the value at
 # which each changed nothing. A run that used another value cannot be continued as it was.
 REMOVED_IN_2 = {"episode_order": "ended", "curriculum_steps": None, "target_update_early": None,
@@ -315,7 +277,21 @@ def migrate(data: dict[str, Any], where: str = "config") -> dict[str, Any]:
                           f"(1..{CONFIG_VERSION}); a newer dqn_mine saved it?")
     if version == 1:
         data = _from_version_1(data, where)
+    if version <= 2:
+        data = _from_version_2(data, where)
     return data
+
+
+def _drop_removed(data: dict[str, Any], removed: dict[str, Any], version: int,
+                  where: str) -> None:
+    """Drop settings a version removed; a value other than the one that changed nothing is a
+    run this version cannot continue as it was."""
+    for name, neutral in removed.items():
+        value = data.pop(name, neutral)
+        if value != neutral:
+            raise ConfigError(f"{where}: a version {version} config with {name} = {value!r}, "
+                              f"which version {version + 1} removed; continue it with the "
+                              "dqn_mine it was made with")
 
 
 def _from_version_1(data: dict[str, Any], where: str) -> dict[str, Any]:
@@ -326,12 +302,43 @@ def _from_version_1(data: dict[str, Any], where: str) -> dict[str, Any]:
     if data.get("curriculum") == "uniform":
         raise ConfigError(f"{where}: a version 1 config with curriculum = 'uniform', which "
                           "version 2 removed; continue it with dqn_mine before that change")
-    for name, neutral in REMOVED_IN_2.items():
-        value = data.pop(name, neutral)
-        if value != neutral:
-            raise ConfigError(f"{where}: a version 1 config with {name} = {value!r}, which "
-                              "version 2 removed; continue it with dqn_mine before that change")
+    _drop_removed(data, REMOVED_IN_2, 1, where)
     return data
+
+
+# Version 3 made these constants at the value they had by default.
+REMOVED_IN_3 = {"ez_mu": 2.0, "ez_max_duration": 100, "max_grad_norm": 40.0, "beta0": 0.4,
+                "eta": 1e-5, "visual_randomisation": False, "eval_task": None}
+# ... and these, which change how a run is run or watched, not what it learns.
+DROPPED_IN_3 = ("learner_queue", "learner_threads", "return_window", "progress",
+                "eval_epsilon", "eval_unstick", "eval_held", "eval_video_every")
+
+
+def _from_version_2(data: dict[str, Any], where: str) -> dict[str, Any]:
+    for name in DROPPED_IN_3:
+        data.pop(name, None)
+    cycle = data.pop("unstick_cycle", 1)
+    if isinstance(data.get("unstick"), bool):
+        data["unstick"] = cycle if data["unstick"] else 0
+    if data.pop("boulder_phases", False):
+        data["curriculum"] = "boulders"
+    precisions = [data.pop(k, "auto") for k in ("learner_precision", "actor_precision")]
+    data.setdefault("precision", next((p for p in precisions if p != "auto"), "auto"))
+    look = {k: data.pop(k) for k in VIEWS["clear"] if k in data}
+    if look:
+        data["view"] = _view_of(look, where)
+    _drop_removed(data, REMOVED_IN_3, 2, where)
+    return data
+
+
+def _view_of(look: dict[str, Any], where: str) -> str:
+    """The view whose environment settings a version 2 config's look settings are."""
+    for name, kwargs in VIEWS.items():
+        if all(look.get(k, False) == kwargs.get(k, False) for k in VIEWS["clear"]):
+            return name
+    raise ConfigError(f"{where}: a version 2 config with {', '.join(look)} = "
+                      f"{tuple(look.values())}, neither view of version 3; continue it with the "
+                      "dqn_mine it was made with")
 
 
 # Named starting points; explicit flags override them. Why each setting: docs/presets.md.
@@ -345,23 +352,20 @@ PRESETS: dict[str, dict[str, Any]] = {
         "checkpoint_interval": 5000, "log_interval": 250, "prefill_explorer": "agent",
     },
     "cpu": {
-        "task": "two-room", "actors": 2, "envs_per_actor": 16, "unstick": True,
+        "task": "two-room", "actors": 2, "envs_per_actor": 16, "unstick": 1,
         "epsilon_schedule": "apex", "exploration": "ez", "curriculum": "backward",
         "curriculum_review": 0.3, "replay_ratio": 0.03,
         "prefill": 20_000, "replay_capacity": 262_144, "updates": 300_000,
         "lr": 1e-4, "target_update_interval": 1000, "publish_interval": 250,
-        "eval_every": 500_000, "eval_unstick": True, "checkpoint_interval": 10_000,
+        "eval_every": 500_000, "checkpoint_interval": 10_000,
         "log_interval": 500, "prefill_explorer": "agent",
     },
 }
-PRESETS["cpu-three-room"] = {**PRESETS["cpu"], "task": "three-room", "curriculum": "adaptive",
-                             "boulder_phases": True,
+PRESETS["cpu-three-room"] = {**PRESETS["cpu"], "task": "three-room", "curriculum": "boulders",
                              "curriculum_review": 0.5, "curriculum_review_unit": "steps",
-                             "updates": 600_000, "camera_pitch": 15.0, "room_colours": True,
-                             "unstick_cycle": 2, "held_on_top": True, "eval_held": True}
-PRESETS["cpu-rooms"] = {**PRESETS["cpu"], "task": "rooms", "updates": 600_000,
-                        "camera_pitch": 15.0, "room_colours": True, "unstick_cycle": 2,
-                        "held_on_top": True, "eval_held": True}
+                             "updates": 600_000, "view": "clear", "unstick": 2}
+PRESETS["cpu-rooms"] = {**PRESETS["cpu"], "task": "rooms", "updates": 600_000, "view": "clear",
+                        "unstick": 2}
 # What each is for, in a line or two (``--help`` lists them).
 PRESET_REASONS = {
     "paper": "the study's configuration on two-room (a scripted walker plays the pre-fill)",
@@ -369,9 +373,8 @@ PRESET_REASONS = {
     "cpu": "full two-room in an hour on a few CPU cores: 2 actors x 16 envs, Ape-X epsilons "
            "with ez and unstick, the backward curriculum, a replay ratio of 0.03",
     "cpu-three-room": "full three-room in 90 minutes on a few CPU cores: the 23-phase table, "
-                      "half the steps reviewing, a pitched camera, room colours, the held item "
-                      "on top",
-    "cpu-rooms": "the rooms task at any --num-rooms: cpu's settings with three-room's look",
+                      "half the steps reviewing, the clear view",
+    "cpu-rooms": "the rooms task at any --num-rooms: cpu's settings with three-room's view",
 }
 
 
@@ -395,9 +398,7 @@ def _choice_problems(c: Config) -> list[str]:
         if choices is not None and getattr(c, name) not in choices:
             p.append(f"--{_flag(name)}: unknown value {getattr(c, name)!r} "
                      f"(choose from {', '.join(choices)})")
-    if c.eval_task is not None and c.eval_task not in TASKS:
-        p.append(f"--eval-task: unknown task {c.eval_task!r} (choose from {', '.join(TASKS)})")
-    if c.eval_num_rooms is not None and (c.eval_task or c.task) != "rooms":
+    if c.eval_num_rooms is not None and c.task != "rooms":
         p.append("--eval-num-rooms applies to an evaluation actor on the rooms task only")
     elif c.eval_num_rooms is not None and not 2 <= c.eval_num_rooms <= MAX_ROOMS:
         p.append(f"--eval-num-rooms must be in 2..{MAX_ROOMS}, got {c.eval_num_rooms}")
@@ -411,10 +412,9 @@ def _bound_problems(c: Config) -> list[str]:
     p = []
     at_least = {"actors": 1, "envs_per_actor": 1, "n_step": 1, "batch_size": 1, "frame_stack": 1,
                 "history_len": 0, "prefill": 0, "updates": 1, "target_update_interval": 1,
-                "publish_interval": 1, "learner_queue": 1, "learner_threads": 0, "eval_every": 0,
-                "eval_video_every": 0, "ez_max_duration": 1, "unstick_cycle": 1,
+                "publish_interval": 1, "eval_every": 0, "unstick": 0,
                 "eval_episodes": 1, "checkpoint_interval": 1, "log_interval": 1,
-                "curriculum_window": 1, "return_window": 1, "seed": 0,
+                "curriculum_window": 1, "seed": 0,
                 "backward_step": 1, "demos": 0, "demo_pretrain": 0}
     for name, low in at_least.items():
         if getattr(c, name) < low:
@@ -449,26 +449,14 @@ def _rate_problems(c: Config) -> list[str]:
     p = []
     if not 0.0 < c.gamma <= 1.0:
         p.append(f"--gamma must be in (0, 1], got {c.gamma}")
-    for name in ("epsilon", "eval_epsilon"):
-        if not 0.0 <= getattr(c, name) <= 1.0:
-            p.append(f"--{_flag(name)} must be in [0, 1], got {getattr(c, name)}")
+    if not 0.0 <= c.epsilon <= 1.0:
+        p.append(f"--epsilon must be in [0, 1], got {c.epsilon}")
     if not 0.0 <= c.curriculum_review < 1.0:
         p.append(f"--curriculum-review must be in [0, 1), got {c.curriculum_review}")
-    if not c.ez_mu > 1.0:
-        p.append(f"--ez-mu must be greater than 1, got {c.ez_mu}")
-    if c.eval_held and c.exploration != "ez":
-        p.append(f"--eval-held holds random actions as --exploration ez does; got --exploration "
-                 f"{c.exploration}")
     if not c.lr > 0:
         p.append(f"--lr must be positive, got {c.lr}")
     if c.zeta < 0:
         p.append(f"--zeta must be >= 0, got {c.zeta}")
-    if not 0.0 <= c.beta0 <= 1.0:
-        p.append(f"--beta0 must be in [0, 1], got {c.beta0}")
-    if not c.eta > 0:
-        p.append(f"--eta must be positive (a zero priority is never sampled again), got {c.eta}")
-    if c.max_grad_norm is not None and c.max_grad_norm < 0:
-        p.append(f"--max-grad-norm must be >= 0 (0 = off), got {c.max_grad_norm}")
     if c.replay_ratio is not None and not c.replay_ratio > 0:
         p.append(f"--replay-ratio must be positive, got {c.replay_ratio}")
     return p + _demo_problems(c)
@@ -493,13 +481,10 @@ def _task_problems(c: Config) -> list[str]:
         p.append(f"--room-size must be a positive finite number, got {c.room_size}")
     if c.max_episode_steps is not None and c.max_episode_steps < 1:
         p.append(f"--max-episode-steps must be at least 1, got {c.max_episode_steps}")
-    if not 0.0 <= c.camera_pitch <= MAX_CAMERA_PITCH:
-        p.append(f"--camera-pitch must be in [0, {MAX_CAMERA_PITCH:g}] degrees, "
-                 f"got {c.camera_pitch}")
     if not 0.0 <= c.curriculum_dr < 1.0:
         p.append(f"--curriculum-dr must be in [0, 1), got {c.curriculum_dr}")
     if c.curriculum_dr and c.curriculum not in PHASED_CURRICULA:
-        p.append("--curriculum-dr applies to --curriculum adaptive only (for domain "
+        p.append("--curriculum-dr applies to --curriculum adaptive or boulders only (for domain "
                  "randomisation alone use --placement any-room)")
     if c.task == "rooms" and not 2 <= c.num_rooms <= MAX_ROOMS:
         p.append(f"--num-rooms must be in 2..{MAX_ROOMS} for the rooms task, got {c.num_rooms}")
@@ -510,8 +495,6 @@ def _task_problems(c: Config) -> list[str]:
                  "--placement fixed")
     if c.curriculum in PHASED_CURRICULA and c.task != "three-room":
         p.append(f"--curriculum {c.curriculum} needs --task three-room, got {c.task}")
-    if c.boulder_phases and (c.task != "three-room" or c.curriculum not in PHASED_CURRICULA):
-        p.append("--boulder-phases applies to --task three-room --curriculum adaptive only")
     if c.curriculum == "schedule" and (c.task != "rooms" or not c.rooms_schedule
                                     or min(c.rooms_schedule) < 2
                                     or max(c.rooms_schedule) > MAX_ROOMS):
@@ -582,9 +565,9 @@ def _show(value) -> str:
 
 
 # ``--help`` sections: the first Config field of each (fields are declared section by section).
-HELP_SECTIONS = {"task": "task", "actors": "actors", "updates": "learner",
-                 "history_len": "network", "replay_capacity": "replay",
-                 "eval_every": "evaluation", "seed": "run"}
+HELP_SECTIONS = {"task": "task", "curriculum": "curriculum", "actors": "actors and exploration",
+                 "updates": "learner", "history_len": "network", "replay_capacity": "replay",
+                 "demos": "demonstrations", "eval_every": "evaluation", "seed": "run"}
 
 
 def _presets_help() -> str:
@@ -687,15 +670,13 @@ def inert_settings(c: Config) -> set[str]:
 
 
 def learner_threads(cfg: Config, cores: Optional[int] = None) -> int:
-    """Torch threads for the learner: explicit, or the cores the acting processes leave free.
+    """Torch threads for the learner: the cores the acting processes leave free, at least one.
 
     Measured (bench.learner): threads competing with busy actor processes for a core cost more
-    than they give, so the automatic choice never oversubscribes.
+    than they give, so it never oversubscribes.
     """
     import os
 
-    if cfg.learner_threads:
-        return cfg.learner_threads
     return max(1, (cores or os.cpu_count() or 1) - cfg.acting_processes)
 
 

@@ -21,7 +21,6 @@ from pathlib import Path
 import numpy as np
 
 from dqn_mine.env.entities import KIT
-from dqn_mine.env.tasks import TASKS
 from dqn_mine.exitcodes import EXIT_BAD_INPUT
 from dqn_mine.play import (
     add_episode_arguments,
@@ -30,6 +29,7 @@ from dqn_mine.play import (
     fill_env_settings,
     make_env,
 )
+from dqn_mine.system.specs import EVAL_EPSILON
 from dqn_mine.video import save_video
 
 
@@ -38,7 +38,8 @@ def build_parser() -> argparse.ArgumentParser:
                                  description=__doc__.split("\n\n")[0])
     ap.add_argument("checkpoint", help="run folder or checkpoint.pt")
     ap.add_argument("--episodes", type=int, default=20, help="episodes to play")
-    add_episode_arguments(ap, {name: f"the run's --eval-{name}" for name in RUN_EVAL_KEYS})
+    add_episode_arguments(ap, {name: f"{value}, as the run's evaluation actor"
+                               for name, value in EVAL_DEFAULTS.items()})
     ap.add_argument("--video", default=None, help="video of a scored episode (.gif or .mp4)")
     ap.add_argument("--video-of", choices=VIDEO_OF, default="first",
                     help="which episode --video records: the first, or the first delivered "
@@ -52,8 +53,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 VIDEO_OF = ("first", "delivered")
-# Unset flags take what the run's evaluation actor plays with: flag -> the config's key.
-RUN_EVAL_KEYS = {"epsilon": "eval_epsilon", "unstick": "eval_unstick", "held": "eval_held"}
+# Unset flags: as the run's evaluation actor plays (near-greedy, no held or unstick actions).
+EVAL_DEFAULTS = {"epsilon": EVAL_EPSILON, "unstick": False, "held": False}
 
 # How an episode ended, for eval.json's "outcomes": what failed, not only that it did.
 OUTCOMES = ("delivered", "holding the kit", "holding a boulder", "kit dropped",
@@ -146,22 +147,17 @@ def check_settings(args: argparse.Namespace) -> None:
 
 def fill_eval_settings(args: argparse.Namespace) -> None:
     """Unset flags: what the run's evaluation actor plays, so that a first evaluation scores the
-    real thing: the full target task (its --eval-task and room count, fixed placement; no
-    curriculum start) at its exploration settings."""
+    real thing: the full target task (its room count, fixed placement; no curriculum start),
+    near-greedily."""
     from dqn_mine import checkpoint as ckpt
-    from dqn_mine.config import Config
 
     trained = ckpt.load(args.checkpoint)["config"]
-    for name, key in RUN_EVAL_KEYS.items():
-        if getattr(args, name) is None:   # a config saved before the key: Config's default
-            setattr(args, name, trained.get(key, Config.__dataclass_fields__[key].default))
-    if args.task is None:
-        args.task = trained.get("eval_task") or trained.get("task")
-        if args.task != trained.get("task") and args.max_steps is None:
-            args.max_steps = TASKS[args.task].step_limit   # as the evaluation actor's
+    for name, value in EVAL_DEFAULTS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
     if args.placement is None:
         args.placement = "fixed"
-    if args.num_rooms is None and args.task == "rooms":
+    if args.num_rooms is None and (args.task or trained["task"]) == "rooms":
         scheduled = trained.get("curriculum") == "schedule"
         last = trained["rooms_schedule"][-1] if scheduled else None
         args.num_rooms = trained.get("eval_num_rooms") or last

@@ -66,11 +66,7 @@ def describe(cfg) -> dict:
     """This machine and the settings ``cfg`` resolves to on it."""
     import torch
 
-    from dqn_mine.config import (
-        resolve_actor_precision,
-        resolve_device,
-        resolve_learner_precision,
-    )
+    from dqn_mine.config import resolve_actor_precision, resolve_device, resolve_learner_precision
 
     device = resolve_device(cfg.device)
     name, flags = cpu_model()
@@ -85,8 +81,8 @@ def describe(cfg) -> dict:
         "torch": torch.__version__,
         "device": str(device),
         "gpu": torch.cuda.get_device_name(0) if device.type == "cuda" else None,
-        "learner_precision": resolve_learner_precision(cfg.learner_precision, device),
-        "actor_precision": str(resolve_actor_precision(cfg.actor_precision,
+        "learner_precision": resolve_learner_precision(cfg.precision, device),
+        "actor_precision": str(resolve_actor_precision(cfg.precision,
                                                        cfg.envs_per_actor)).replace("torch.", ""),
     }
     return record

@@ -27,6 +27,7 @@ COLUMNS = (
     "margin_loss",    # --demos: the large-margin loss, mean over the sampled demonstrations
 )
 LOW_EPSILON = 0.01   # the study's rate: an env at or below it plays (almost) its greedy policy
+RETURN_WINDOW = 100   # finished episodes in the rolling mean return and length
 
 
 class MetricsTable:
@@ -125,6 +126,13 @@ class RateMeter:
         r = (value - self.last_value) / dt if dt > 0 else math.nan
         self.last_value, self.last_time = value, now
         return r
+
+
+def progress_line(row: dict[str, float], total_updates: int) -> str:
+    """The bar's figures as one line, for a log file."""
+    figures = " ".join(f"{k}={v}" for k, v in progress_postfix(row).items())
+    return f"train: {int(row['update']):,}/{total_updates:,} updates, " \
+           f"{row['wall_time'] / 60:.1f} min | {figures}"
 
 
 def progress_postfix(row: dict[str, float]) -> dict[str, str]:

@@ -84,9 +84,7 @@ ENV_DEFAULTS = {"task": "two-room", "room_size": 16.0, "placement": "fixed", "nu
                 "max_steps": None, "room_colours": False, "camera_pitch": 0.0,
                 "held_on_top": False}
 CONFIG_KEYS = {"task": "task", "room_size": "room_size", "placement": "placement",
-               "num_rooms": "num_rooms", "max_steps": "max_episode_steps",
-               "room_colours": "room_colours", "camera_pitch": "camera_pitch",
-               "held_on_top": "held_on_top"}
+               "num_rooms": "num_rooms", "max_steps": "max_episode_steps"}
 
 
 def fill_env_settings(args: argparse.Namespace) -> None:
@@ -94,11 +92,14 @@ def fill_env_settings(args: argparse.Namespace) -> None:
     trained = {}
     if args.checkpoint:
         from dqn_mine import checkpoint as ckpt
+        from dqn_mine.env.mine import VIEWS
 
-        trained = ckpt.load(args.checkpoint)["config"]
+        config = ckpt.load(args.checkpoint)["config"]
+        trained = {name: config[key] for name, key in CONFIG_KEYS.items()}
+        trained.update(VIEWS[config["view"]])
     for name, default in ENV_DEFAULTS.items():
         if getattr(args, name) is None:
-            setattr(args, name, trained.get(CONFIG_KEYS[name], default))
+            setattr(args, name, trained.get(name, default))
     if args.task != "rooms":
         args.num_rooms = None
 
@@ -108,7 +109,6 @@ def make_env(args: argparse.Namespace):
     TimeLimit wrapper and never passes it on, so the task's default limit would still cut a longer
     --max-steps short."""
     from dqn_mine.env import MineRescueEnv
-    from dqn_mine.system.specs import optional_env_kwargs
 
     kwargs = dict(task=args.task, placement=args.placement, room_size=args.room_size,
                   render_mode="rgb_array", randomise_visuals=args.visual_randomisation)
@@ -116,8 +116,10 @@ def make_env(args: argparse.Namespace):
         kwargs["num_rooms"] = args.num_rooms
     if args.phase is not None:
         kwargs["phase"] = args.phase
-    kwargs.update(optional_env_kwargs(args.room_colours, args.camera_pitch, args.held_on_top,
-                                      args.boulder_phases))
+    kwargs.update(room_colours=args.room_colours, camera_pitch=args.camera_pitch,
+                  held_on_top=args.held_on_top)
+    if args.boulder_phases:
+        kwargs["boulder_phases"] = True
     if args.max_steps is not None:
         kwargs["max_episode_steps"] = args.max_steps
     return MineRescueEnv(**kwargs)

@@ -19,9 +19,9 @@ import math
 import sys
 from pathlib import Path
 
-from dqn_mine.config import PHASED_CURRICULA, Config
+from dqn_mine.config import PHASED_CURRICULA, Config, ConfigError
 from dqn_mine.exitcodes import EXIT_BAD_INPUT
-from dqn_mine.metrics import LOW_EPSILON, read_metrics
+from dqn_mine.metrics import LOW_EPSILON, RETURN_WINDOW, read_metrics
 
 
 def load_run(run_dir: Path) -> list[dict]:
@@ -43,22 +43,38 @@ def has_values(rows: list[dict], name: str) -> bool:
     return any(not math.isnan(v) for v in column(rows, name))
 
 
+# The settings the figures read: a run that this version can no longer continue (it used a
+# setting since removed) is still plotted from them.
+PLOT_SETTINGS = ("curriculum", "curriculum_window", "curriculum_review")
+
+
+def run_config(path: Path) -> Config:
+    """A run's config.json, or, for a run of a removed setting, the settings the plot reads."""
+    import json
+
+    try:
+        return Config.from_json(path)
+    except ConfigError:
+        saved = json.loads(path.read_text())
+        return Config(**{name: saved[name] for name in PLOT_SETTINGS if name in saved})
+
+
 def full_task_returns(rows: list[dict], cfg, low_eps: bool = False) -> list[tuple]:
     """(update, minutes, return) of the rows whose return is the full task's over a full window.
 
     With the adaptive curriculum that is phase 1's ``phase_return`` (its own episodes only, no
     reviewed ones) from the row by which about ``curriculum_window`` phase-1 episodes have ended
     (estimated from the episode count since the switch and the review share, since the table
-    does not count them); without it the actors' ``episode_return`` once ``return_window``
+    does not count them); without it the actors' ``episode_return`` once ``RETURN_WINDOW``
     episodes have ended. ``low_eps``: the same rows' means over the episodes played at epsilon
     <= 0.01 (``phase_low_eps_return``, ``low_eps_return``)."""
     if cfg.curriculum == "backward":   # its own column, over episodes begun at the real start
         return [(r["update"], r["wall_time"] / 60, r["full_task_return"]) for r in rows
-                if r.get("full_task_episodes", 0) >= cfg.return_window and not low_eps]
+                if r.get("full_task_episodes", 0) >= RETURN_WINDOW and not low_eps]
     if cfg.curriculum not in PHASED_CURRICULA:
         key = "low_eps_return" if low_eps else "episode_return"
         return [(r["update"], r["wall_time"] / 60, r.get(key, math.nan)) for r in rows
-                if r["episodes"] >= cfg.return_window]
+                if r["episodes"] >= RETURN_WINDOW]
     key = "phase_low_eps_return" if low_eps else "phase_return"
     full = [r for r in rows if r["phase"] == 1]
     if not full:
@@ -331,7 +347,7 @@ def main(argv: list[str] | None = None) -> int:
         runs = {Path(d).name: load_run(Path(d)) for d in args.runs}
         configs = {}
         if args.milestones or args.band:
-            configs = {Path(d).name: Config.from_json(Path(d) / "config.json") for d in args.runs}
+            configs = {Path(d).name: run_config(Path(d) / "config.json") for d in args.runs}
         if args.milestones:
             print(milestone_table(runs, configs, args.milestones))
             return 0

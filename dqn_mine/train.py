@@ -126,7 +126,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
-        summary = Run(cfg, run_dir, state, serial=cfg.serial, progress=cfg.progress).execute()
+        # a bar on a terminal; in a log file (nohup, a sweep) a line per metrics row instead
+        summary = Run(cfg, run_dir, state, serial=cfg.serial,
+                      progress=sys.stderr.isatty()).execute()
     except (DemoError, NothingTrained) as exc:   # before anything was trained
         if state is None:   # the same command can start it again
             discard_fresh_run(run_dir)

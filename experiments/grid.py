@@ -125,7 +125,7 @@ class Grid:
             cfg = Config(**{**PRESETS[preset], "preset": preset, **values})
         except TypeError as exc:
             raise ConfigError(f"grid {self.name}, {name}: {exc}") from None
-        cfg = dataclasses.replace(cfg, seed=seed, run_dir=str(run_dir), progress=False)
+        cfg = dataclasses.replace(cfg, seed=seed, run_dir=str(run_dir))
         try:
             return cfg.validate()
         except ConfigError as exc:

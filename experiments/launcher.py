@@ -41,7 +41,7 @@ from experiments.grid import RunSpec
 
 LOG = "train.log"
 # Settings a resume may change without making it another run.
-RESUMABLE = {"updates", "resume", "run_dir", "progress"}
+RESUMABLE = {"updates", "resume", "run_dir"}
 
 
 def run_state(spec: RunSpec) -> str:
@@ -91,8 +91,7 @@ def _differs(spec: RunSpec) -> str:
 def train_command(spec: RunSpec, state: str) -> list[str]:
     base = [sys.executable, "-m", "dqn_mine.train"]
     if state == "resume":
-        return base + ["--resume", str(spec.run_dir), "--updates", str(spec.cfg.updates),
-                       "--no-progress"]
+        return base + ["--resume", str(spec.run_dir), "--updates", str(spec.cfg.updates)]
     return base + spec.argv()
 
 

@@ -45,7 +45,7 @@ def in_process_actor(cfg, net, spec=None, phase=0):
 def test_bfloat16_actor_acts_on_the_published_weights():
     cfg = dataclasses.replace(Config(**PRESETS["smoke"], preset="smoke"), actors=1,
                               envs_per_actor=2, replay_capacity=4096, eval_every=0,
-                              actor_precision="bfloat16").validate()
+                              precision="bfloat16").validate()
     torch.manual_seed(0)
     learner_net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
     with in_process_actor(cfg, learner_net) as actor:
@@ -109,7 +109,7 @@ def test_unstick_turns_a_stuck_greedy_policy_random_only_while_stuck(noop_networ
     taken, stuck = _actions_taken(cfg.validate(), 40, net)
     assert (taken == 5).all(), "without unstick a no-op policy never moves"
     assert not stuck.any(), "and the actor does not compare frames it has no use for"
-    taken, stuck = _actions_taken(dataclasses.replace(cfg, unstick=True).validate(), 40, net)
+    taken, stuck = _actions_taken(dataclasses.replace(cfg, unstick=1).validate(), 40, net)
     # a no-op leaves the frame as it was, so the step after it is random; a random step that
     # moved or turned gives the greedy no-op back
     assert (taken[1:][stuck[:-1]] != 5).mean() > 0.6     # uniform: 5 of 6 are not the no-op
@@ -117,24 +117,24 @@ def test_unstick_turns_a_stuck_greedy_policy_random_only_while_stuck(noop_networ
     assert 0.2 < stuck.mean() < 0.9
 
 
-def test_evaluation_actor_unsticks_only_with_eval_unstick():
-    """The training actors' --unstick does not reach the evaluation actor; --eval-unstick does,
-    and held ez actions only with --eval-held."""
-    base = dataclasses.replace(Config(**PRESETS["cpu"], preset="cpu"), actors=1,
-                               envs_per_actor=1, replay_capacity=4096, eval_every=1000,
-                               eval_episodes=1)
-    net = DuelingQNetwork(frame_stack=base.frame_stack, history_len=base.history_len)
-    for eval_unstick, eval_held in ((False, False), (True, False), (True, True)):
-        cfg = dataclasses.replace(base, eval_unstick=eval_unstick, eval_held=eval_held).validate()
-        with _run_blocks(cfg, net) as (blocks, weights):
-            actor = EvalActor(cfg, actor_specs(cfg)[-1], Control(blocks), weights)
-            try:
-                explorer = actor.core.explorer
-                assert explorer.unstick is eval_unstick and explorer.durations is eval_held
-                assert (explorer.mu, explorer.max_duration) == (cfg.ez_mu, cfg.ez_max_duration)
-                assert list(explorer.epsilon) == [cfg.eval_epsilon]
-            finally:
-                actor.close()
+def test_evaluation_actor_plays_near_greedily_whatever_the_training_actors_do():
+    """Training actors with ez's held actions and --unstick 2; the evaluation actor plays
+    epsilon 0.01 with neither, while a training actor of the same run has both."""
+    cfg = dataclasses.replace(Config(**PRESETS["cpu-rooms"], preset="cpu-rooms"), actors=1,
+                              envs_per_actor=1, replay_capacity=4096, eval_every=1000,
+                              eval_episodes=1, curriculum="none").validate()
+    net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
+    with _run_blocks(cfg, net) as (blocks, weights):
+        actor = EvalActor(cfg, actor_specs(cfg)[-1], Control(blocks), weights)
+        try:
+            explorer = actor.core.explorer
+            assert not explorer.unstick and not explorer.durations
+            assert list(explorer.epsilon) == [0.01]
+        finally:
+            actor.close()
+    with in_process_actor(cfg, net) as trainer:
+        explorer = trainer.core.explorer
+        assert explorer.unstick and explorer.durations and trainer.core.recent.shape[1] == 2
 
 
 def test_actor_starts_episodes_in_the_shared_phase_and_records_them():

@@ -70,7 +70,7 @@ def test_empty_history_slots_differ_from_any_action():
 
 
 def test_lowered_network_keeps_float32_greedy_actions_at_sparse_reward_gaps():
-    """Actors act with the heavy layers in bfloat16 (--actor-precision). With Q-values near 0.4
+    """Actors act with the heavy layers in bfloat16 (--precision). With Q-values near 0.4
     and gaps of ~1e-3 between the best actions, as in a 1,000-step sparse-reward task at gamma
     0.99, a network rounded to bfloat16 to its end ties or swaps its best actions (bfloat16's
     spacing at 0.4 is 0.002); with the output layers in float32 it picks the float32 argmax."""

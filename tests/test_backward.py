@@ -218,7 +218,7 @@ def test_a_backward_run_reaches_the_full_task_and_records_it(tmp_path):
         [sys.executable, "-m", "dqn_mine.train", "--preset", "smoke", "--serial",
          "--curriculum", "backward", "--backward-step", "20", "--curriculum-window", "20",
          "--curriculum-threshold", "0.3", "--replay-ratio", "0.1", "--updates", "600",
-         "--prefill", "500", "--run-dir", str(run_dir), "--no-progress", "--log-interval", "100",
+         "--prefill", "500", "--run-dir", str(run_dir), "--log-interval", "100",
          "--seed", "1"],
         cwd=ROOT, capture_output=True, text=True, timeout=900)
     assert res.returncode == 0, res.stderr[-3000:]

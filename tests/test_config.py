@@ -2,6 +2,7 @@
 json round trip."""
 
 import dataclasses
+import inspect
 import json
 
 import numpy as np
@@ -19,13 +20,17 @@ from dqn_mine.config import (
     resolve_device,
     to_argv,
 )
+from dqn_mine.replay import NStepWriter, PrioritizedReplay
+from dqn_mine.replay.sampler import BETA0
 
 
 def test_defaults_are_the_studys():
     c = Config()
     assert (c.actors, c.epsilon, c.epsilon_schedule, c.lr, c.batch_size, c.gamma, c.n_step) == \
         (7, 0.01, "fixed", 3e-5, 32, 0.99, 6)
-    assert (c.replay_capacity, c.zeta, c.beta0, c.eta) == (1_048_576, 0.6, 0.4, 1e-5)
+    assert (c.replay_capacity, c.zeta, BETA0) == (1_048_576, 0.6, 0.4)
+    for eta_taker in (PrioritizedReplay, NStepWriter):   # eta: the study's, where it is added
+        assert inspect.signature(eta_taker).parameters["eta"].default == 1e-5
     assert (c.history_len, c.frame_stack, c.publish_interval, c.prefill, c.task) == \
         (20, 1, 500, 50_000, "two-room")
     assert parse_args([]) == c.validate()
@@ -44,18 +49,18 @@ def test_frozen():
 
 
 def test_flag_types():
-    c = parse_args(["--no-unstick", "--rooms-schedule", "3", "4", "--max-episode-steps", "300",
-                    "--replay-ratio", "0.05", "--max-grad-norm", "none", "--task", "rooms"])
-    assert c.unstick is False and c.rooms_schedule == (3, 4) and c.max_episode_steps == 300
-    assert c.replay_ratio == 0.05 and c.max_grad_norm is None
-    assert parse_args(["--unstick"]).unstick is True
+    c = parse_args(["--unstick", "2", "--rooms-schedule", "3", "4", "--max-episode-steps", "300",
+                    "--replay-ratio", "0.05", "--demos-from", "none", "--task", "rooms"])
+    assert c.unstick == 2 and c.rooms_schedule == (3, 4) and c.max_episode_steps == 300
+    assert c.replay_ratio == 0.05 and c.demos_from is None
+    assert parse_args(["--no-serial"]).serial is False and parse_args(["--serial"]).serial
 
 
 def test_cli_round_trip():
-    c = Config(task="rooms", num_rooms=4, room_size=12.5, max_episode_steps=123, unstick=True,
-               lr=1 / 3, rooms_schedule=(4, 5), replay_ratio=0.02, eval_task="three-room",
-               max_grad_norm=None, run_dir="runs/x y", preset="smoke", seed=9, serial=True,
-               progress=False)
+    c = Config(task="rooms", num_rooms=4, room_size=12.5, max_episode_steps=123, unstick=2,
+               lr=1 / 3, rooms_schedule=(4, 5), replay_ratio=0.02, view="clear",
+               precision="float32", run_dir="runs/x y", preset="smoke", seed=9, serial=True,
+               eval_num_rooms=5)
     assert parse_args(to_argv(c)) == c
     assert parse_args(to_argv(Config())) == Config()
 
@@ -91,29 +96,22 @@ BAD = [
      "--placement fixed"),
     (["--task", "cave"], "invalid choice"),
     (["--device", "tpu"], "invalid choice"),
-    (["--actor-precision", "float16"], "invalid choice"),
+    (["--precision", "float16"], "invalid choice"),
+    (["--view", "wide"], "invalid choice"),
     (["--placement", "anywhere"], "invalid choice"),
     (["--preset", "huge"], "unknown preset"),
     (["--actors", "two"], "invalid int"),
     (["--zeta", "-0.1"], "--zeta"),
-    (["--beta0", "1.5"], "--beta0"),
-    (["--beta0", "-0.1"], "--beta0"),
-    (["--eta", "0"], "--eta"),
     (["--gamma", "0"], "--gamma"),
     (["--gamma", "1.01"], "--gamma"),
-    (["--camera-pitch", "-1"], "--camera-pitch"),
-    (["--camera-pitch", "31"], "--camera-pitch"),
     (["--epsilon", "2"], "--epsilon"),
-    (["--eval-epsilon", "-1"], "--eval-epsilon"),
-    (["--eval-held"], "--eval-held"),          # the study's epsilon exploration holds nothing
-    (["--return-window", "0"], "--return-window"),
+    (["--unstick", "-1"], "--unstick"),
     (["--lr", "0"], "--lr"),
     (["--frame-stack", "0"], "--frame-stack"),
     (["--history-len", "-1"], "--history-len"),
     (["--target-update-interval", "0"], "--target-update-interval"),
     (["--publish-interval", "0"], "--publish-interval"),
     (["--replay-ratio", "0"], "--replay-ratio"),
-    (["--max-grad-norm", "-1"], "--max-grad-norm"),
     (["--room-size", "0"], "--room-size"),
     (["--max-episode-steps", "0"], "--max-episode-steps"),
     (["--curriculum", "uniform"], "--curriculum"),
@@ -121,11 +119,9 @@ BAD = [
     (["--task", "rooms", "--num-rooms", "1"], "--num-rooms"),
     (["--curriculum", "adaptive", "--task", "one-room"], "three-room"),
     (["--curriculum", "adaptive", "--task", "two-room"], "needs --task three-room"),
-    (["--boulder-phases", "--task", "two-room"], "--task three-room"),
-    (["--boulder-phases", "--task", "three-room"], "--boulder-phases"),
+    (["--curriculum", "boulders", "--task", "two-room"], "needs --task three-room"),
     (["--curriculum", "schedule", "--task", "rooms", "--rooms-schedule", "1", "3"],
      "--rooms-schedule"),
-    (["--eval-task", "cave"], "--eval-task"),
     (["--prefill", "-1"], "--prefill"),
     (["--minutes", "0"], "--minutes"),
     (["--task", "three-room", "--curriculum-dr", "0.5"], "--curriculum-dr"),
@@ -149,7 +145,7 @@ def test_bad_flags_give_one_line_errors(argv, fragment):
 
 def test_json_round_trip(tmp_path):
     c = Config(lr=1 / 3, rooms_schedule=(3, 5), max_episode_steps=None, replay_ratio=0.1 + 0.2,
-               eta=1e-7, run_dir=str(tmp_path), zeta=0.0)
+               view="clear", run_dir=str(tmp_path), zeta=0.0)
     c.to_json(tmp_path / "config.json")
     back = Config.from_json(tmp_path / "config.json")
     assert back == c and isinstance(back.rooms_schedule, tuple)
@@ -209,6 +205,33 @@ def test_saved_configs_carry_their_version_and_older_ones_migrate(tmp_path):
     v2 = {k: v for k, v in c.saved_dict().items() if k != "prefill_explorer"}
     (tmp_path / "v2.json").write_text(json.dumps(v2))
     assert Config.from_json(tmp_path / "v2.json").prefill_explorer == "bump-and-press"
+
+
+def test_version_2_configs_migrate_to_merged_and_removed_settings(tmp_path):
+    """Version 3 merged the look settings into --view, the two precisions into one, unstick
+    and its cycle into one count, the boulder phases into a curriculum, and made constants of
+    settings no preset changed; a version 2 run with another value fails in one line."""
+    from dqn_mine.config import VERSION_KEY
+
+    v2 = {**{k: v for k, v in PRESETS["cpu"].items() if k != "unstick"},
+          VERSION_KEY: 2, "preset": "cpu-three-room", "task": "three-room",
+          "curriculum": "adaptive", "boulder_phases": True, "curriculum_review": 0.5,
+          "curriculum_review_unit": "steps", "updates": 600_000, "camera_pitch": 15.0,
+          "room_colours": True, "held_on_top": True, "unstick": True, "unstick_cycle": 2,
+          "eval_held": True, "eval_unstick": True, "eval_epsilon": 0.01, "learner_queue": 4,
+          "learner_precision": "auto", "actor_precision": "float32", "progress": True,
+          "ez_mu": 2.0, "eta": 1e-5, "beta0": 0.4, "max_grad_norm": 40.0}
+    (tmp_path / "v2.json").write_text(json.dumps(v2))
+    assert Config.from_json(tmp_path / "v2.json") == \
+        parse_args(["--preset", "cpu-three-room", "--precision", "float32"])
+    for name, value in [("camera_pitch", 10.0), ("eta", 1e-3), ("ez_mu", 3.0),
+                        ("max_grad_norm", None)]:
+        (tmp_path / "v2.json").write_text(json.dumps({**v2, name: value}))
+        with pytest.raises(ConfigError, match=f"version 2 config with .*{name}") as info:
+            Config.from_json(tmp_path / "v2.json")
+        assert "\n" not in str(info.value)
+    (tmp_path / "v2.json").write_text(json.dumps({**v2, "unstick": False}))
+    assert Config.from_json(tmp_path / "v2.json").unstick == 0
 
 
 @pytest.mark.parametrize("content,fragment", [
@@ -300,14 +323,14 @@ def test_learner_threads():
     assert learner_threads(Config(actors=2), cores=2) == 1
     assert learner_threads(Config(actors=7), cores=16) == 9
     assert learner_threads(Config(actors=7, eval_every=10_000), cores=16) == 8
-    assert learner_threads(Config(actors=2, learner_threads=3), cores=2) == 3
 
 
 def test_help_is_grouped_by_section():
     from dqn_mine.config import build_parser
 
     text = build_parser().format_help()
-    heads = ["task:", "actors:", "learner:", "network:", "replay:", "evaluation:", "run:"]
+    heads = ["task:", "curriculum:", "actors and exploration:", "learner:", "network:", "replay:",
+             "demonstrations:", "evaluation:", "run:"]
     lines = text.splitlines()
     at = [lines.index(h) for h in heads]
     assert at == sorted(at)                                   # in this order
@@ -315,7 +338,9 @@ def test_help_is_grouped_by_section():
         i for i, line in enumerate(lines) if line.strip().startswith(flag)))
     assert lines[section_of("--lr")] == "learner:"
     assert lines[section_of("--zeta")] == "replay:"
-    assert lines[section_of("--epsilon ")] == "actors:"
+    assert lines[section_of("--epsilon ")] == "actors and exploration:"
+    assert lines[section_of("--backward-step")] == "curriculum:"
+    assert lines[section_of("--demo-margin")] == "demonstrations:"
     assert lines[section_of("--resume")] == "run:"
 
 

@@ -13,12 +13,12 @@ import pytest
 
 from dqn_mine.config import parse_args
 from dqn_mine.system.curriculum import Curriculum
-from dqn_mine.system.specs import actor_specs, eval_env_kwargs, optional_env_kwargs
+from dqn_mine.system.specs import actor_specs, eval_env_kwargs
 
 ROOT = Path(__file__).resolve().parents[1]
 # The agent pre-fills: the scripted walker's episodes would not count towards the switches.
 FAST = ["--actors", "2", "--prefill", "100", "--replay-capacity", "4096", "--log-interval", "10",
-        "--no-progress", "--max-episode-steps", "30", "--room-size", "8",
+        "--max-episode-steps", "30", "--room-size", "8",
         "--prefill-explorer", "agent"]
 
 
@@ -56,29 +56,28 @@ def test_adaptive_curriculum_starts_easiest_and_advances_one_phase_per_full_wind
 
 def test_three_room_preset_starts_at_the_easiest_boulder_phase_and_its_envs_know_them():
     cfg = parse_args(["--preset", "cpu-three-room"])
-    assert (cfg.task, cfg.boulder_phases, cfg.curriculum) == ("three-room", True, "adaptive")
+    assert (cfg.task, cfg.curriculum, cfg.view, cfg.unstick) == ("three-room", "boulders",
+                                                                 "clear", 2)
     assert (cfg.curriculum_review, cfg.curriculum_review_unit) == (0.5, "steps")
-    assert (cfg.unstick, cfg.eval_unstick, cfg.unstick_cycle) == (True, True, 2)
-    assert (cfg.held_on_top, cfg.eval_held) == (True, True)
     cpu = parse_args(["--preset", "cpu"])                       # two-room's results keep theirs
-    assert (cpu.unstick_cycle, cpu.held_on_top, cpu.eval_held) == (1, False, False)
+    assert (cpu.unstick, cpu.view) == (1, "study")
     assert Curriculum(cfg).phase == 23
     assert actor_specs(cfg)[0].env_kwargs["boulder_phases"] is True
     assert eval_env_kwargs(cfg)["boulder_phases"] is True    # harmless: it plays phase 1
-    other = parse_args(["--preset", "cpu-three-room", "--eval-task", "two-room"])
-    assert "boulder_phases" not in eval_env_kwargs(other)
+    assert Curriculum(parse_args(["--task", "three-room", "--curriculum", "adaptive"])).phase == 6
 
 
-def test_optional_env_settings_are_passed_only_when_on():
-    """Off, an optional setting is left out, so the env keeps its own default."""
-    optional = {"room_colours", "camera_pitch", "held_on_top", "boulder_phases"}
-    assert optional_env_kwargs(False, 0.0, False, False) == {}
-    assert optional_env_kwargs(True, 15.0, True, True) == {
-        "room_colours": True, "camera_pitch": 15.0, "held_on_top": True, "boulder_phases": True}
-    trained = actor_specs(parse_args(["--preset", "cpu-three-room"]))[0].env_kwargs
-    assert {name: trained[name] for name in optional} == optional_env_kwargs(True, 15.0, True, True)
-    plain = actor_specs(parse_args(["--preset", "cpu"]))[0].env_kwargs
-    assert not optional & set(plain)
+def test_the_view_reaches_the_training_and_the_evaluation_envs():
+    """clear: the camera pitched 15 down, room colours, the held item on top, for training and
+    scoring alike; study: none of them passed, so the environment keeps its own defaults."""
+    clear = parse_args(["--preset", "cpu-three-room"])
+    look = {"room_colours": True, "camera_pitch": 15.0, "held_on_top": True}
+    for kwargs in (actor_specs(clear)[0].env_kwargs, eval_env_kwargs(clear)):
+        assert {name: kwargs[name] for name in look} == look
+    for argv in (["--preset", "cpu"], ["--preset", "cpu-three-room", "--view", "study"]):
+        study = parse_args(argv)
+        for kwargs in (actor_specs(study)[0].env_kwargs, eval_env_kwargs(study)):
+            assert not set(look) & set(kwargs)
 
 
 def test_low_epsilon_return_counts_only_the_near_greedy_episodes_of_the_phase():
@@ -97,13 +96,11 @@ def test_low_epsilon_return_counts_only_the_near_greedy_episodes_of_the_phase():
 
 
 def test_the_scripted_prefill_walkers_episodes_do_not_advance_the_curriculum():
-    from dqn_mine.agent.explore import SCRIPTED_EPSILON
-
     cfg = parse_args(["--task", "three-room", "--curriculum", "adaptive",
                       "--curriculum-window", "2", "--curriculum-threshold", "0.4"])   # at 6
     cur = Curriculum(cfg)
     for _ in range(4):
-        cur.record(6, 1.0, epsilon=SCRIPTED_EPSILON)   # the walker delivers: not the agent
+        cur.record(6, 1.0, epsilon=1.0, scripted=True)   # the walker delivers: not the agent
     cur.advance(updates=0)
     assert cur.phase == 6 and math.isnan(cur.phase_return)
     cur.record(6, 1.0, epsilon=0.01)
@@ -273,7 +270,7 @@ def test_room_schedule_switches_at_the_right_update(tmp_path):
 
 def test_evaluation_results_arrive_in_the_metrics(tmp_path):
     rows = run("--task", "one-room", "--eval-every", "200", "--eval-episodes", "2",
-               "--eval-video-every", "1", "--updates", "200",
+               "--updates", "200",
                "--run-dir", str(tmp_path / "eval"), *FAST)
     evaluated = [r for r in rows if r["eval_return"] != ""]
     assert evaluated, "no evaluation result reached metrics.csv"
@@ -288,16 +285,14 @@ def test_evaluation_results_arrive_in_the_metrics(tmp_path):
 
 
 def test_evaluation_actor_runs_the_full_target_task():
-    cfg = parse_args(["--task", "three-room", "--placement", "any-room",
-                      "--visual-randomisation", "--eval-every", "1000"])
+    cfg = parse_args(["--task", "three-room", "--placement", "any-room", "--eval-every", "1000"])
     specs = actor_specs(cfg)
     evaluator = specs[-1]
     assert len(specs) == cfg.actors + 1 and evaluator.streams == ()
     assert evaluator.evaluates and not any(s.evaluates for s in specs[:-1])
     assert evaluator.env_kwargs["placement"] == "fixed" and evaluator.env_kwargs["task"] == \
         "three-room"
-    assert not evaluator.env_kwargs["randomise_visuals"]
-    assert all(s.env_kwargs["randomise_visuals"] for s in specs[:-1])
+    assert all(s.env_kwargs["placement"] == "any-room" for s in specs[:-1])
     adaptive = parse_args(["--task", "three-room", "--curriculum", "adaptive",
                            "--eval-every", "1000"])
     assert Curriculum(adaptive).phase == 6 and actor_specs(adaptive)[-1].evaluates
@@ -392,30 +387,3 @@ def test_curriculum_dr_by_steps_gives_randomised_episodes_that_share_of_the_step
     no_review.played(DR_PHASE, 2_000)
     assert no_review.episode_start(16, 0, rng)[0] == 16           # 2,000 >= 0.3 * 2,800
     assert rng.bit_generator.state == state, "the decision draws no random number"
-
-
-def test_room_colours_reach_the_training_and_the_evaluation_envs():
-    cfg = parse_args(["--preset", "cpu-three-room"])           # the preset colours the rooms
-    assert actor_specs(cfg)[0].env_kwargs["room_colours"] is True
-    assert eval_env_kwargs(cfg)["room_colours"] is True     # the same look when scored
-    plain = parse_args(["--preset", "cpu-three-room", "--no-room-colours"])
-    assert "room_colours" not in actor_specs(plain)[0].env_kwargs
-    assert "room_colours" not in actor_specs(parse_args(["--preset", "cpu"]))[0].env_kwargs
-
-
-def test_held_on_top_reaches_the_training_and_the_evaluation_envs():
-    cfg = parse_args(["--preset", "cpu-three-room"])        # the preset draws it on top
-    assert actor_specs(cfg)[0].env_kwargs["held_on_top"] is True
-    assert eval_env_kwargs(cfg)["held_on_top"] is True      # scored through the same eyes
-    plain = parse_args(["--preset", "cpu-three-room", "--no-held-on-top"])
-    assert "held_on_top" not in actor_specs(plain)[0].env_kwargs
-    assert "held_on_top" not in actor_specs(parse_args(["--preset", "cpu"]))[0].env_kwargs
-
-
-def test_camera_pitch_reaches_the_training_and_the_evaluation_envs():
-    cfg = parse_args(["--preset", "cpu-three-room"])         # the preset pitches it 15 down
-    assert actor_specs(cfg)[0].env_kwargs["camera_pitch"] == 15.0
-    assert eval_env_kwargs(cfg)["camera_pitch"] == 15.0      # scored through the same eyes
-    level = parse_args(["--preset", "cpu-three-room", "--camera-pitch", "0"])
-    assert "camera_pitch" not in actor_specs(level)[0].env_kwargs
-    assert "camera_pitch" not in actor_specs(parse_args(["--preset", "cpu"]))[0].env_kwargs

@@ -218,7 +218,7 @@ def test_demonstrations_make_a_greedy_agent_deliver(tmp_path):
     from tests.test_train import run_train
 
     common = ["--preset", "smoke", "--serial", "--updates", "300", "--prefill", "200",
-              "--epsilon-schedule", "fixed", "--epsilon", "0", "--no-progress"]
+              "--epsilon-schedule", "fixed", "--epsilon", "0"]
     rewarded = {}
     for name, flags in (("plain", []), ("demos", ["--demos", "30", "--demo-pretrain", "1500"])):
         res = run_train(*common, *flags, "--run-dir", str(tmp_path / name), timeout=900)

@@ -25,8 +25,8 @@ def run_dir(tmp_path_factory) -> Path:
     run = tmp_path_factory.mktemp("eval") / "run"
     res = subprocess.run(
         [sys.executable, "-m", "dqn_mine.train", "--preset", "smoke", "--serial", "--actors", "1",
-         "--updates", "20", "--prefill", "100", "--replay-capacity", "2048", "--no-progress",
-         "--unstick-cycle", "2", "--run-dir", str(run)],
+         "--updates", "20", "--prefill", "100", "--replay-capacity", "2048",
+         "--unstick", "2", "--run-dir", str(run)],
         cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-2000:]
     return run
@@ -56,7 +56,7 @@ def test_evaluate_writes_eval_json_and_is_reproducible(run_dir, tmp_path):
     assert (tmp_path / "e.gif").stat().st_size > 0
     assert scores["unstick"] is False
     assert scores["held"] is False
-    assert scores["epsilon"] == 0.01     # the run's --eval-epsilon
+    assert scores["epsilon"] == 0.01     # as the run's evaluation actor
     unstuck = evaluate(str(run_dir), "--episodes", "1", "--max-steps", "25", "--unstick",
                        "--held", "--out", str(tmp_path / "unstuck.json"))
     assert unstuck.returncode == 0, unstuck.stderr
@@ -65,25 +65,26 @@ def test_evaluate_writes_eval_json_and_is_reproducible(run_dir, tmp_path):
 
 
 def test_evaluate_plays_by_default_what_the_runs_evaluation_actor_plays(run_dir, tmp_path):
-    """The run's --eval-epsilon, --eval-unstick and --eval-held, its evaluation task and a fixed
-    placement (a DR run's evaluation actor plays the fixed task); explicit flags still win."""
+    """Near-greedy (epsilon 0.01, no unstick or held actions, whatever the training actors
+    did) on the run's task with a fixed placement (a DR run's evaluation actor plays the fixed
+    task); explicit flags still win."""
     from dqn_mine import checkpoint as ckpt
     from dqn_mine.config import Config
 
     saved = ckpt.load(run_dir)
-    cfg = Config.from_dict({**saved["config"], "eval_epsilon": 0.05, "eval_unstick": True,
-                            "placement": "any-room", "eval_task": "two-room"})
+    cfg = Config.from_dict({**saved["config"], "exploration": "ez", "unstick": 1,
+                            "placement": "any-room", "task": "two-room"})
     ckpt.save(tmp_path, saved["updater"], saved["counters"], cfg)
     res = evaluate(str(tmp_path), "--episodes", "1", "--max-steps", "20")
     assert res.returncode == 0, res.stderr
     scores = json.loads((tmp_path / "eval.json").read_text())
-    assert (scores["epsilon"], scores["unstick"], scores["held"]) == (0.05, True, False)
+    assert (scores["epsilon"], scores["unstick"], scores["held"]) == (0.01, False, False)
     assert (scores["task"], scores["placement"]) == ("two-room", "fixed")
-    plain = evaluate(str(tmp_path), "--episodes", "1", "--max-steps", "20", "--epsilon", "0.01",
-                     "--no-unstick", "--out", str(tmp_path / "plain.json"))
-    assert plain.returncode == 0, plain.stderr
-    scores = json.loads((tmp_path / "plain.json").read_text())
-    assert (scores["epsilon"], scores["unstick"]) == (0.01, False)
+    held = evaluate(str(tmp_path), "--episodes", "1", "--max-steps", "20", "--epsilon", "0.05",
+                    "--unstick", "--held", "--out", str(tmp_path / "held.json"))
+    assert held.returncode == 0, held.stderr
+    scores = json.loads((tmp_path / "held.json").read_text())
+    assert (scores["epsilon"], scores["unstick"], scores["held"]) == (0.05, True, True)
 
 
 def test_a_checkpoint_of_config_version_1_evaluates_or_fails_in_one_line(run_dir, tmp_path):
@@ -134,17 +135,16 @@ def test_load_agent_plays_an_episode_like_the_readme(run_dir):
 
 
 def test_an_unsticking_agent_keeps_the_runs_cycle(run_dir):
-    """The run was configured with --unstick-cycle 2: its agent counts the same loops as stuck."""
+    """The run was configured with --unstick 2: its agent counts the same loops as stuck."""
     assert dqn_mine.load_agent(run_dir, unstick=True).core.recent.shape[1] == 2
     assert dqn_mine.load_agent(run_dir).core.recent.shape[1] == 0   # not unsticking: no frames
 
 
 def test_a_holding_agent_holds_for_the_runs_durations(run_dir):
     """held=True: random actions held as the run's ez training actors hold them."""
-    config = json.loads((run_dir / "config.json").read_text())
     explorer = dqn_mine.load_agent(run_dir, epsilon=0.5, held=True).core.explorer
     assert explorer.durations
-    assert (explorer.mu, explorer.max_duration) == (config["ez_mu"], config["ez_max_duration"])
+    assert (explorer.mu, explorer.max_duration) == (2.0, 100)
     assert not dqn_mine.load_agent(run_dir).core.explorer.durations
 
 

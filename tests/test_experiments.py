@@ -138,8 +138,7 @@ def test_run_states_decide_skip_resume_restart(tmp_path):
     assert states[4].startswith("conflict") and "lr" in states[4]
     assert states[5] == "fresh"
     cmd = train_command(specs[1], "resume")
-    assert cmd[-5:] == ["--resume", str(specs[1].run_dir), "--updates", str(target),
-                        "--no-progress"]
+    assert cmd[-4:] == ["--resume", str(specs[1].run_dir), "--updates", str(target)]
     assert "--run-dir" in train_command(specs[5], "fresh")
     outcomes = [Outcome(specs[0], "complete"), Outcome(specs[1], "resume", 0)]
     assert sweep_exit_code(outcomes, interrupted=False) == 0

@@ -217,7 +217,7 @@ def test_bump_and_press_walks_until_stuck_then_presses_and_turns_away():
     turns = [bp.act(np.zeros(2, np.int64), free)[0] for _ in range(3)]
     assert len(set(turns)) == 1 and turns[0] in (2, 3)  # then one turn held, at least 3 steps
     bp.reset(0)
-    assert bp.queued[0] == [] and np.isinf(bp.epsilon).all()   # never counted as near-greedy
+    assert bp.queued[0] == [] and bp.scripted and (bp.epsilon == 1).all()   # never near-greedy
 
 
 def test_prefill_first_hands_over_to_the_agent_after_its_steps():
@@ -228,22 +228,22 @@ def test_prefill_first_hands_over_to_the_agent_after_its_steps():
     assert explorer.unstick                            # the acting core must compare frames
     taken = []
     for _ in range(5):                                 # 2 envs: 3 calls are 6 steps
-        taken.append(explorer.epsilon.copy())
+        taken.append((explorer.epsilon.copy(), explorer.scripted))
         actions = explorer.act(greedy, np.zeros(2, bool))
-        taken[-1] = (taken[-1], actions)
-    assert all(np.isinf(eps).all() for eps, _ in taken[:3])
-    assert all((eps == 0).all() and (a == greedy).all() for eps, a in taken[3:])
+        taken[-1] = (*taken[-1], actions)
+    assert all(scripted and (eps == 1).all() for eps, scripted, _ in taken[:3])
+    assert all(not scripted and (eps == 0).all() and (a == greedy).all()
+               for eps, scripted, a in taken[3:])
     assert not explorer.unstick                        # no frame comparisons after the pre-fill
-    assert sum((a == 0).sum() for _, a in taken[:3]) >= 4   # mostly straight ahead
+    assert sum((a == 0).sum() for _, _, a in taken[:3]) >= 4   # mostly straight ahead
 
 
 # --- configuration -----------------------------------------------------------------------------
 
 @pytest.mark.parametrize("argv, match", [
     (["--exploration", "levy"], "exploration"),
-    (["--ez-mu", "1.0"], "ez-mu"),
-    (["--ez-max-duration", "0"], "ez-max-duration"),
-    (["--unstick-cycle", "0"], "unstick-cycle"),
+    (["--unstick", "-1"], "unstick"),
+    (["--unstick"], "expected one argument"),
 ])
 def test_bad_exploration_flags_are_one_line_errors(argv, match):
     from dqn_mine.config import ConfigError, parse_args

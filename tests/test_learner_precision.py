@@ -156,8 +156,8 @@ def test_precision_choice_and_errors():
     assert resolve_learner_precision("bfloat16", "cpu") == "bfloat16"
     assert resolve_learner_precision("auto", "cpu") == ("bfloat16" if native_bf16()
                                                         else "float32")
-    with pytest.raises(ConfigError, match="--learner-precision"):
-        parse_args(["--learner-precision", "fp8"])
+    with pytest.raises(ConfigError, match="--precision"):
+        parse_args(["--precision", "fp8"])
     with pytest.raises(ValueError, match="precision"):
         DQNUpdater(DuelingQNetwork(), precision="half")
 

@@ -125,7 +125,7 @@ def test_checkpoint_agent_plays_its_training_task(tmp_path):
     run_dir = tmp_path / "run"
     train = subprocess.run(
         [sys.executable, "-m", "dqn_mine.train", "--preset", "smoke", "--serial", "--actors", "1",
-         "--updates", "20", "--prefill", "100", "--replay-capacity", "2048", "--no-progress",
+         "--updates", "20", "--prefill", "100", "--replay-capacity", "2048",
          "--run-dir", str(run_dir)], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert train.returncode == 0, train.stderr[-2000:]
     out = tmp_path / "agent.gif"

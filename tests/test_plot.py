@@ -1,5 +1,6 @@
 """`python -m dqn_mine.plot`: learning-curve PNGs of run folders."""
 
+import json
 import math
 
 import numpy as np
@@ -59,7 +60,6 @@ def test_plot_of_a_folder_without_metrics_is_one_line(tmp_path, capsys):
 def test_milestones_count_full_task_windows_only(tmp_path, capsys):
     """Phase 1's rolling return counts once a full window of phase-1 episodes has ended; a high
     return of an easier phase, or of a half-filled window after the switch, does not."""
-    import json
 
     from dqn_mine.config import parse_args
     from dqn_mine.plot import milestones
@@ -75,8 +75,8 @@ def test_milestones_count_full_task_windows_only(tmp_path, capsys):
             for i, (p, e, r) in enumerate(table)]
     reached = milestones(rows, cfg, (0.5, 0.9, 0.99))
     assert reached == {0.5: (400.0, 4.0), 0.9: (600.0, 6.0), 0.99: None}
-    # without a curriculum: the actors' return once return_window episodes have ended
-    plain = parse_args(["--return-window", "100"])
+    # without a curriculum: the actors' return once RETURN_WINDOW episodes have ended
+    plain = parse_args([])
     assert milestones(rows, plain, (0.9,)) == {0.9: (300.0, 3.0)}
     # the command line reads each run's config.json
     run_dir = write_metrics(tmp_path / "run", rows)
@@ -120,8 +120,6 @@ def test_band_takes_each_runs_last_value_zero_before_its_start_and_none_after_it
 
 
 def test_band_plot_of_seeds_writes_a_png(tmp_path):
-    import json
-
     runs = []
     for seed, phases in enumerate(([3, 2, 1, 1, 1, 1, 1, 1], [2, 2, 2, 1, 1, 1, 1, 1])):
         run = fake_run(tmp_path / f"seed{seed}", phases)
@@ -153,3 +151,19 @@ def test_phase_stays_by_hand(tmp_path, capsys):
     assert main([str(run_dir), "--phases"]) == 0
     out = capsys.readouterr().out
     assert "| run | 2 | 3.0 | 4.0 | 0.20 | 0.20 |" in out
+
+
+def test_a_run_this_version_cannot_continue_is_still_read_for_its_figures(tmp_path):
+    """A version 2 run with a look that is neither view: it cannot resume (one-line error), yet
+    the plot reads the settings its figures need."""
+    from dqn_mine.config import Config, ConfigError
+    from dqn_mine.plot import run_config
+
+    path = tmp_path / "config.json"
+    path.write_text(json.dumps({"config_version": 2, "curriculum": "adaptive",
+                                "curriculum_window": 7, "camera_pitch": 15.0,
+                                "room_colours": False}))
+    with pytest.raises(ConfigError, match="version 2"):
+        Config.from_json(path)
+    cfg = run_config(path)
+    assert (cfg.curriculum, cfg.curriculum_window) == ("adaptive", 7)

@@ -18,7 +18,7 @@ from dqn_mine.shared import leftover_segments
 ROOT = Path(__file__).resolve().parents[1]
 # A tiny fast configuration on top of the smoke preset.
 TINY = ["--preset", "smoke", "--actors", "2", "--prefill", "200", "--replay-capacity", "4096",
-        "--log-interval", "20", "--checkpoint-interval", "1000", "--no-progress"]
+        "--log-interval", "20", "--checkpoint-interval", "1000"]
 
 
 def train_cmd(*args: str) -> list:
@@ -331,7 +331,7 @@ def test_killed_runner_takes_its_actors_and_shared_memory_with_it(tmp_path):
 def test_smoke_preset_learns_one_room(tmp_path):
     """The whole system learns a small task on CPU (the README's main job)."""
     run_dir = tmp_path / "learn"
-    res = run_train("--preset", "smoke", "--no-progress", "--run-dir", str(run_dir),
+    res = run_train("--preset", "smoke", "--run-dir", str(run_dir),
                     timeout=1500)
     assert res.returncode == 0, res.stderr[-3000:]
     rows = metrics_rows(run_dir)
@@ -354,7 +354,7 @@ def test_cpu_preset_finds_rewards_on_two_room_within_its_prefill(tmp_path):
     records rewarded two-room episodes within one pre-fill of 20,000 steps per actor."""
     run_dir = tmp_path / "cpu"
     res = run_train("--preset", "cpu", "--serial", "--updates", "40", "--replay-capacity",
-                    "65536", "--eval-every", "0", "--log-interval", "20", "--no-progress",
+                    "65536", "--eval-every", "0", "--log-interval", "20",
                     "--run-dir", str(run_dir), timeout=600)
     assert res.returncode == 0, res.stderr[-3000:]
     rows = metrics_rows(run_dir)
@@ -369,7 +369,7 @@ def test_bump_and_press_prefill_records_more_rewards_than_the_agents_own(tmp_pat
     played by the fresh agent at epsilon 0.01."""
     common = ["--task", "one-room", "--serial", "--actors", "2", "--envs-per-actor", "8",
               "--prefill", "8000", "--updates", "20", "--replay-capacity", "32768",
-              "--log-interval", "20", "--no-progress"]
+              "--log-interval", "20"]
     rows = {}
     for explorer in ("bump-and-press", "agent"):
         run_dir = tmp_path / explorer

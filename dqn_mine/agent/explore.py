@@ -31,13 +31,6 @@ from dqn_mine.env.interface import FORWARD, INTERACT, NUM_ACTIONS, TURN_LEFT, TU
 
 # Actions below INTERACT (forward, backward, the turns) are held; interact and no-op last one step.
 HELD_ACTIONS = INTERACT
-# The exploration rate an episode of the scripted walker is recorded with: above every real rate.
-SCRIPTED_EPSILON = float("inf")
-
-
-def is_scripted(epsilon: float) -> bool:
-    """Whether an episode recorded with ``epsilon`` was played by the scripted walker."""
-    return epsilon == SCRIPTED_EPSILON
 
 
 def zeta_durations(rng: np.random.Generator, size: int, mu: float, cap: int) -> np.ndarray:
@@ -54,6 +47,8 @@ class Explorer:
     did not change at their last step [E]) and returns the actions to take [E]. A running random
     action keeps going until its duration is spent; an episode end (``reset(j)``) cancels it.
     """
+
+    scripted = False   # its greedy actions are the network's
 
     def __init__(self, epsilon, num_envs: int, rng: np.random.Generator,
                  durations: bool = False, mu: float = 2.0, max_duration: int = 100,
@@ -99,16 +94,17 @@ class BumpAndPress:
     changing, then presses action 4 once and turns away, left or right at random, for 3-19
     steps. Like the agents it sees only whether its view changed, but it does what no
     epsilon-greedy walker does: it tries action 4 at every wall or entity it meets and leaves
-    the wall at once. Same interface as :class:`Explorer`. Its ``epsilon`` is infinite (no step
-    is the network's choice; see :func:`is_scripted`): its episodes count neither as near-greedy
-    ones nor towards the curriculum's switch, which judges the agent.
+    the wall at once. Same interface as :class:`Explorer`. No step is the network's choice, so
+    its ``epsilon`` is 1 and it is ``scripted``: its episodes count neither as near-greedy ones
+    nor towards the curriculum's switch, which judges the agent.
     """
 
     unstick = True   # it needs to know when the frame did not change
+    scripted = True
 
     def __init__(self, num_envs: int, rng: np.random.Generator):
         self.rng = rng
-        self.epsilon = np.full(num_envs, SCRIPTED_EPSILON)
+        self.epsilon = np.ones(num_envs)
         self.queued: list[list[int]] = [[] for _ in range(num_envs)]   # turns still to take
 
     def reset(self, j: int) -> None:
@@ -152,6 +148,10 @@ class PrefillFirst:
     @property
     def epsilon(self) -> np.ndarray:
         return self.current.epsilon
+
+    @property
+    def scripted(self) -> bool:
+        return self.current.scripted
 
     def reset(self, j: int) -> None:
         self.prefill.reset(j)

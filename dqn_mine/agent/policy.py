@@ -24,22 +24,21 @@ class AgentPolicy:
 
     def __init__(self, net: DuelingQNetwork, frame_stack: int, history_len: int,
                  epsilon: float = 0.0, seed: int = 0, unstick: bool = False,
-                 unstick_cycle: int = 1, held: tuple[float, int] | None = None):
-        """``held``: (mu, max_duration) to hold random actions as ez-greedy training actors do
-        (None: every random action lasts one step)."""
+                 unstick_cycle: int = 1, held: bool = False):
+        """``held``: hold random actions as ez-greedy training actors do (else every random
+        action lasts one step)."""
         self.net = net.eval()
         self.frame_stack, self.history_len = frame_stack, history_len
         self.epsilon = epsilon
         self.rng = np.random.default_rng(seed)
-        ez = dict(durations=True, mu=held[0], max_duration=held[1]) if held else {}
-        explorer = Explorer(epsilon, 1, self.rng, unstick=unstick, **ez)
+        explorer = Explorer(epsilon, 1, self.rng, durations=held, unstick=unstick)
         self.core = ActingCore(self.net, explorer, 1, frame_stack, history_len, unstick_cycle)
         self.last_action: int | None = None   # None: the next observation starts an episode
 
     @classmethod
     def from_checkpoint(cls, path, epsilon: float = 0.0, seed: int = 0,
                         unstick: bool = False, held: bool = False) -> AgentPolicy:
-        """``held``: random actions held with the run's ``--ez-mu`` and ``--ez-max-duration``.
+        """``held``: random actions held as the ez training actors hold them.
         Raises CheckpointError (one line) for a missing or corrupt checkpoint."""
         from dqn_mine import checkpoint as ckpt
         from dqn_mine.config import network_shape
@@ -53,11 +52,9 @@ class AgentPolicy:
             raise ckpt.CheckpointError(f"{path}: the network weights do not fit "
                                        f"({str(exc).splitlines()[0]})") from None
         # unstick as the run's actors did: the same loop length counts as stuck
-        config = state["config"]
-        cycle = config["unstick_cycle"]
-        durations = (config["ez_mu"], config["ez_max_duration"]) if held else None
+        cycle = max(1, state["config"]["unstick"])
         return cls(net, shape["frame_stack"], shape["history_len"], epsilon, seed, unstick, cycle,
-                   durations)
+                   held)
 
     def reset(self) -> None:
         self.last_action = None

@@ -85,7 +85,7 @@ def learning_run(out_dir: Path, seconds: float = LEARNING_SECONDS) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         run_dir = Path(tmp) / "two-room"
         cmd = [sys.executable, "-m", "dqn_mine.train", "--preset", "cpu", "--actors", "15",
-               "--updates", "1000000", "--no-progress", "--run-dir", str(run_dir)]
+               "--updates", "1000000", "--run-dir", str(run_dir)]
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                                 text=True)
         try:

@@ -181,7 +181,7 @@ def learner_section(quick: bool) -> list[str]:
         "Adam with grad-norm clip 40, host->device batch copy, td_abs back to the host. float32 "
         "is the plain update (the reference); bfloat16 computes convolutions and the first head "
         "layers in bfloat16 with float32 master weights, outputs, loss and Adam "
-        "(`--learner-precision`). Variants timed in turns, median of "
+        "(`--precision`). Variants timed in turns, median of "
         f"{rounds} rounds. An update is {per_sample / 1e6:.1f} MFLOP per sample "
         "(3 forward passes + backward); 'limit' = a 2048^2 matrix product in the same dtype "
         "and threads.\n",
@@ -207,7 +207,7 @@ def learner_section(quick: bool) -> list[str]:
               "(an actor) 2 threads can collapse to a few updates/s, far below 1 thread (the "
               "'1 core busy' rows: OpenMP threads wait on each other across a contended "
               "core). Learner: threads = cores the acting processes leave free, at least 1 "
-              "(Config.learner_threads 0 = auto); actors: 1 thread.\n"]
+              "(config.learner_threads); actors: 1 thread.\n"]
     return lines
 
 
@@ -253,7 +253,7 @@ def run(quick: bool = False) -> str:
         lines = learner_section(quick)
         torch.set_num_threads(1)
         lines += ["## Actor network (batched inference, 1 torch thread)\n",
-                  f"bfloat16 weights (--actor-precision): this CPU computes bfloat16 "
+                  f"bfloat16 weights (--precision): this CPU computes bfloat16 "
                   f"{'natively' if native_bf16() else 'by emulation'}.\n",
                   "| envs per forward | float32 env steps/s | float32 us/frame | "
                   "bfloat16 env steps/s | bfloat16 us/frame | bfloat16 / float32 |",

@@ -19,7 +19,7 @@ import numpy as np
 from dqn_mine.config import resolve_actor_precision
 from dqn_mine.metrics import read_metrics
 
-# name -> (environment, configurations (actors, envs per actor, --actor-precision)). More envs per
+# name -> (environment, configurations (actors, envs per actor, --precision)). More envs per
 # actor amortise the batched forward pass (bench.learner's inference table); from 8 envs per
 # actor, actors act in bfloat16 where the CPU has it (auto). The float32 row is the reference.
 TASKS = {
@@ -61,9 +61,9 @@ def pipeline(env_kwargs: dict, actors: int, envs_per_actor: int, precision: str,
         run_dir = Path(tmp) / "run"
         cmd = [sys.executable, "-m", "dqn_mine.train", "--preset", "smoke", *env_flags, "--actors",
                str(actors), "--envs-per-actor", str(envs_per_actor), "--updates", str(updates),
-               "--actor-precision", precision,
+               "--precision", precision,
                "--prefill", "500", "--replay-capacity", "65536", "--eval-every", "0",
-               "--log-interval", str(max(1, updates // 10)), "--no-progress",
+               "--log-interval", str(max(1, updates // 10)),
                "--run-dir", str(run_dir)]
         res = subprocess.run(cmd, capture_output=True, text=True)
         if res.returncode != 0:

@@ -82,6 +82,10 @@ FOV_RANGE = (50.0, 70.0)           # vertical field of view, degrees
 # kit anywhere in reach stays in view; the top edge still shows a wall's full height from 5.6
 # units away.
 MAX_CAMERA_PITCH = 30.0
+# Named looks (MineEnv keyword arguments): the study's, and one where the agent sees what it
+# reaches (the pitch above), tells rooms apart (floor colours) and sees what it carries.
+VIEWS = {"study": {},
+         "clear": {"camera_pitch": 15.0, "room_colours": True, "held_on_top": True}}
 
 _COS = [math.cos(2 * math.pi * k / HEADINGS) for k in range(HEADINGS)]
 _SIN = [math.sin(2 * math.pi * k / HEADINGS) for k in range(HEADINGS)]

@@ -47,7 +47,10 @@ class Batch(NamedTuple):
                      np.empty(b, np.int64), np.empty(b, np.int64), np.empty(b, bool))
 
 
-def beta_at(update: int, total_updates: int, beta0: float) -> float:
+BETA0 = 0.4   # PER's and the study's initial importance-sampling exponent
+
+
+def beta_at(update: int, total_updates: int, beta0: float = BETA0) -> float:
     """Importance-sampling exponent, linear from ``beta0`` at update 0 to 1 at ``total_updates``."""
     if total_updates <= 0:
         return 1.0

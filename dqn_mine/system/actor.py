@@ -38,24 +38,23 @@ class ActorBase:
         self.parent_pid = parent_pid
         self.next_parent_check = 0.0
         self.rng = np.random.default_rng(spec.seed)
-        # Held actions are for training, and for the evaluation actor only with --eval-held: it
-        # measures the near-greedy policy with plain epsilon, unstuck when asked (--eval-unstick).
+        # Held and unstick actions are for training: the evaluation actor measures the
+        # near-greedy policy with plain epsilon.
         explorer = Explorer(spec.epsilon, spec.num_envs, self.rng,
-                            durations=cfg.exploration == "ez" and (training or cfg.eval_held),
-                            mu=cfg.ez_mu, max_duration=cfg.ez_max_duration,
-                            unstick=cfg.unstick if training else cfg.eval_unstick)
+                            durations=training and cfg.exploration == "ez",
+                            unstick=training and cfg.unstick > 0)
         if training and cfg.prefill_explorer == "bump-and-press" and cfg.prefill:
             explorer = PrefillFirst(BumpAndPress(spec.num_envs, self.rng), explorer, cfg.prefill)
         # Pulled float32 weights are converted on load (WeightBroadcast copies into the tensors).
         self.net = lower_heavy_layers(DuelingQNetwork(**network_shape(cfg)),
-                                      resolve_actor_precision(cfg.actor_precision,
+                                      resolve_actor_precision(cfg.precision,
                                                               spec.num_envs)).eval()
         self.version = -1            # of the weights loaded (WeightBroadcast's publish count)
         self.pull_weights()
         self.envs = [MineRescueEnv(**spec.env_kwargs, render_mode=render_mode)
                      for _ in range(spec.num_envs)]
         self.core = ActingCore(self.net, explorer, spec.num_envs, cfg.frame_stack,
-                               cfg.history_len, cfg.unstick_cycle)
+                               cfg.history_len, max(1, cfg.unstick))
         self.returns = np.zeros(spec.num_envs)
         self.lengths = np.zeros(spec.num_envs, dtype=np.int64)
         self.phases = np.zeros(spec.num_envs, dtype=np.int64)   # each episode's start phase
@@ -116,7 +115,7 @@ class ActorBase:
         record = Episode(self.spec.index, float(self.returns[j]), int(self.lengths[j]),
                          int(self.phases[j]), self.spec.evaluates,
                          float(self.core.explorer.epsilon[j]), bool(self.full[j]),
-                         float(self.shares[j]))
+                         float(self.shares[j]), self.core.explorer.scripted)
         self.episodes += 1
         self.between_episodes(j)
         self.new_episode(j)
@@ -156,7 +155,7 @@ class Actor(ActorBase):
         self.to_go = np.zeros(spec.num_envs, dtype=np.int64)   # backward: each start's
         self.paths = [PathStarts(np.random.default_rng([spec.seed, j]), env.max_episode_steps)
                       for j, env in enumerate(self.envs)] if self.curriculum.backward else None
-        self.writers = [NStepWriter(storage, stream=s, eta=cfg.eta) for s in spec.streams]
+        self.writers = [NStepWriter(storage, stream=s) for s in spec.streams]
         self.start_envs()
 
     def apply_curriculum(self, j: int) -> None:

@@ -27,6 +27,7 @@ class Episode(NamedTuple):
     epsilon: float = float("nan")   # the rate of the env that played it (NaN: unknown)
     full_task: bool = True          # it began at the task's real start (no curriculum start)
     start_share: float = float("nan")   # backward: its start's expert steps to go / solution
+    scripted: bool = False          # played by the scripted pre-fill walker, not the agent
 
 
 class Control:
@@ -38,7 +39,7 @@ class Control:
         self.phase_cell = blocks["ctl_phase"]          # [1] adaptive curriculum phase (0: none)
         self.rooms_cell = blocks["ctl_rooms"]          # [1] scheduled room count (0: none)
         self.actor_steps = blocks["ctl_actor_steps"]   # [A] env steps per actor
-        # [A, K, 7] ret, length, phase, is_eval, eps, full_task, start_share
+        # [A, K, 8] ret, length, phase, is_eval, eps, full_task, start_share, scripted
         self.ep_ring = blocks["ctl_ep_ring"]
         self.ep_written = blocks["ctl_ep_written"]     # [A] records written per actor
         self._ep_read = np.zeros(len(self.ep_written), dtype=np.int64)  # reader-local cursor
@@ -104,9 +105,9 @@ class Control:
         for actor, written in enumerate(self.ep_written.copy()):
             start = max(int(self._ep_read[actor]), int(written) - EPISODE_RING)
             for n in range(start, int(written)):
-                ret, length, phase, is_eval, eps, full, share = self.ep_ring[
+                ret, length, phase, is_eval, eps, full, share, scripted = self.ep_ring[
                     actor, n % EPISODE_RING]
                 out.append(Episode(actor, float(ret), int(length), int(phase), bool(is_eval),
-                                   float(eps), bool(full), float(share)))
+                                   float(eps), bool(full), float(share), bool(scripted)))
             self._ep_read[actor] = written
         return out

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from dqn_mine.agent.explore import is_scripted
 from dqn_mine.config import PHASED_CURRICULA, Config
 from dqn_mine.env.tasks import TASKS, phase_table
 from dqn_mine.metrics import LOW_EPSILON, Rolling
@@ -54,7 +53,7 @@ class Curriculum:
         self.phased = self.kind in PHASED_CURRICULA
         self.backward = self.kind == "backward"
         self.step = cfg.backward_step
-        self.easiest = max(phase_table(cfg.task, cfg.boulder_phases)) if self.phased else 0
+        self.easiest = max(phase_table(cfg.task, self.kind == "boulders")) if self.phased else 0
         # adaptive: the current phase (1 = the full task); 0 without phases
         self.phase = self._start_phase(phase)
         # schedule: the current room count; None without the schedule
@@ -69,18 +68,18 @@ class Curriculum:
     def _start_phase(self, resumed: int | None) -> int:
         if self.backward:
             return self.step if resumed is None else int(resumed)
-        if self.kind != "adaptive" or resumed is None:
+        if not self.phased or resumed is None:
             return self.easiest
         return int(resumed)
 
     # -- the runner's side ---------------------------------------------------------------------
     def record(self, phase: int, ret: float, epsilon: float = float("nan"),
-               share: float = float("nan")) -> None:
+               share: float = float("nan"), scripted: bool = False) -> None:
         """A training episode that started in ``phase``, played at exploration rate ``epsilon``,
         ended with return ``ret``. Every one of the phase counts towards the switch (the
         study's rule) except the scripted pre-fill walker's, which are not the agent's; the
         low-epsilon mean is only shown (an unknown rate, NaN, is not low)."""
-        if phase == self.phase and not is_scripted(epsilon):
+        if phase == self.phase and not scripted:
             self.returns.extend([ret])
             self.shares.extend([share])
             if epsilon <= LOW_EPSILON:
@@ -90,7 +89,7 @@ class Curriculum:
         """After a batch of recorded episodes: one phase harder when the rolling mean of the
         last ``window`` episodes of the current phase exceeds the threshold; the schedule's room
         count for ``updates`` updates."""
-        if self.kind == "adaptive" and self.phase > 1 and self._passed():
+        if self.phased and self.phase > 1 and self._passed():
             self.phase -= 1
             self._clear()
         if self.backward and self.phase < self.full_steps and self._passed() \

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dqn_mine.config import Config
-from dqn_mine.metrics import LOW_EPSILON, Rolling
+from dqn_mine.metrics import LOW_EPSILON, RETURN_WINDOW, Rolling
 from dqn_mine.system.control import Episode
 
 
@@ -14,10 +14,10 @@ class EpisodeStats:
     def __init__(self, cfg: Config, episodes: int = 0, rewarded: int = 0):
         self.episodes = episodes           # training episodes, over every start of the run
         self.rewarded = rewarded           # of those, the ones with a reward (a delivery)
-        self.returns = Rolling(cfg.return_window)
-        self.lengths = Rolling(cfg.return_window)
-        self.low_eps_returns = Rolling(cfg.return_window)
-        self.full_returns = Rolling(cfg.return_window)      # those begun at the real start
+        self.returns = Rolling(RETURN_WINDOW)
+        self.lengths = Rolling(RETURN_WINDOW)
+        self.low_eps_returns = Rolling(RETURN_WINDOW)
+        self.full_returns = Rolling(RETURN_WINDOW)      # those begun at the real start
         self.full_episodes = 0                              # ... how many, in this process
         self.eval_returns = Rolling(cfg.eval_episodes)
         self.eval_lengths = Rolling(cfg.eval_episodes)

@@ -2,7 +2,7 @@
 
 Every ``eval_every`` training env steps it plays ``eval_episodes`` episodes with the latest
 weights (one version for a whole evaluation), records them with ``is_eval`` so the runner logs
-``eval_return``, and saves a GIF of the first one every ``eval_video_every`` evaluations. Being
+``eval_return``, and saves a GIF of the first one every ``VIDEO_EVERY`` evaluations. Being
 paced by the training actors' steps, it does not steal cores from them in between.
 """
 
@@ -15,10 +15,11 @@ from dqn_mine.config import Config
 from dqn_mine.system.actor import ActorBase
 from dqn_mine.system.specs import ActorSpec
 
+VIDEO_EVERY = 10   # evaluations between GIFs of an evaluation episode
+
 
 class EvalActor(ActorBase):
-    """Plain epsilon, unstuck only with --eval-unstick, random actions held only with
-    --eval-held; writes no replay."""
+    """Plain epsilon 0.01, no held or unstick actions; writes no replay."""
 
     def __init__(self, cfg: Config, spec: ActorSpec, control, weights,
                  parent_pid: int | None = None):
@@ -42,9 +43,8 @@ class EvalActor(ActorBase):
     def evaluate(self, episodes: int) -> None:
         """Run ``episodes`` episodes; now and then record the first one as a GIF."""
         self.pull_weights()
-        every = self.cfg.eval_video_every
         self.evaluations += 1
-        if every and self.cfg.run_dir and (self.evaluations - 1) % every == 0:
+        if self.cfg.run_dir and (self.evaluations - 1) % VIDEO_EVERY == 0:
             self.recording = [self.envs[0].render()]
         target = self.episodes + episodes
         while self.episodes < target and not self.should_stop():

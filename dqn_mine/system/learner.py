@@ -16,6 +16,10 @@ import numpy as np
 
 from dqn_mine.config import Config, network_shape, resolve_learner_precision
 
+# Ape-X's clip of the global gradient norm (the study states none). With Huber loss and IS
+# weights <= 1 it rarely binds; it guards against rare spikes, e.g. right after a target sync.
+MAX_GRAD_NORM = 40.0
+
 
 class BatchSource:
     """Ready batches on the device; threaded (parallel runs) or inline (serial mode, tests)."""
@@ -97,13 +101,11 @@ class Learner:
         net = DuelingQNetwork(**network_shape(cfg))
         demos = storage.layout.demo_streams > 0
         self.updater = DQNUpdater(net, lr=cfg.lr, target_update_interval=cfg.target_update_interval,
-                                  device=device, max_grad_norm=cfg.max_grad_norm,
-                                  precision=resolve_learner_precision(cfg.learner_precision,
-                                                                      device),
+                                  device=device, max_grad_norm=MAX_GRAD_NORM,
+                                  precision=resolve_learner_precision(cfg.precision, device),
                                   demo_margin=cfg.demo_margin,
                                   demo_weight=cfg.demo_loss_weight if demos else 0.0)
-        self.replay = PrioritizedReplay(storage, zeta=cfg.zeta, eta=cfg.eta,
-                                        seed=cfg.seed,
+        self.replay = PrioritizedReplay(storage, zeta=cfg.zeta, seed=cfg.seed,
                                         demo_bonus=cfg.demo_bonus if demos else 0.0)
         self.restored = 0
         if replay_snapshot is not None:
@@ -114,8 +116,7 @@ class Learner:
         self.first_update = 0       # ``updates`` when this process started (0, or a checkpoint's)
         self.source = BatchSource(
             self.replay, cfg.batch_size, beta=self.beta,
-            to_device=lambda b: batch_to_device(b, device), queue_size=cfg.learner_queue,
-            threaded=threaded)
+            to_device=lambda b: batch_to_device(b, device), threaded=threaded)
 
     @property
     def new_updates(self) -> int:
@@ -133,7 +134,7 @@ class Learner:
     def beta(self) -> float:
         from dqn_mine.replay import beta_at
 
-        return beta_at(self.updates, self.cfg.updates, self.cfg.beta0)
+        return beta_at(self.updates, self.cfg.updates)
 
     def load_state(self, state: dict) -> None:
         self.updater.load_state_dict(state["updater"])

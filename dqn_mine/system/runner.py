@@ -12,6 +12,7 @@ import contextlib
 import json
 import math
 import signal
+import sys
 import time
 import traceback
 from dataclasses import dataclass
@@ -21,7 +22,7 @@ from dqn_mine import checkpoint as ckpt
 from dqn_mine.config import Config, learner_threads
 from dqn_mine.demos import DemoSet
 from dqn_mine.exitcodes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
-from dqn_mine.metrics import MetricsTable, RateMeter, progress_postfix
+from dqn_mine.metrics import MetricsTable, RateMeter, progress_line, progress_postfix
 from dqn_mine.replay.snapshot import SnapshotError, demo_streams
 from dqn_mine.system.context import RunContext
 from dqn_mine.system.curriculum import Curriculum
@@ -167,7 +168,7 @@ class Run:
         """Take in the finished episodes; the curriculum follows, the actors read it back."""
         for ep in self.ctx.control.drain_episodes():
             if self.stats.add(ep):
-                self.curriculum.record(ep.phase, ep.ret, ep.epsilon, ep.start_share)
+                self.curriculum.record(ep.phase, ep.ret, ep.epsilon, ep.start_share, ep.scripted)
         self.curriculum.advance(self.updates())
         self.ctx.control.show_curriculum(self.curriculum)
 
@@ -219,6 +220,8 @@ class Run:
                                  "planned the demonstrations; nothing was trained")
 
         old = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+        if not self.progress:
+            print("demos: planning the expert's episodes", file=sys.stderr, flush=True)
         try:
             return run_demos(self.cfg, self.progress)
         finally:
@@ -334,6 +337,8 @@ class Run:
             if learner.updates % cfg.log_interval == 0 or learner.updates == cfg.updates:
                 row = self.log_row(agg, *rates)
                 bar.set_postfix(progress_postfix(row), refresh=False)
+                if not self.progress:
+                    print(progress_line(row, cfg.updates), file=sys.stderr, flush=True)
                 agg = {key: [] for key in UPDATE_STATS}
             if learner.updates % cfg.checkpoint_interval == 0:
                 self.save_checkpoint()

@@ -11,6 +11,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from dqn_mine.config import Config
+from dqn_mine.env.mine import VIEWS
+
+# The evaluation actor plays near-greedily, as Ape-X's and the study's did: a learned policy
+# should not need held or unstick random actions to deliver.
+EVAL_EPSILON = 0.01
 
 
 @dataclass(frozen=True)
@@ -33,34 +38,20 @@ class ActorSpec:
 def env_kwargs(cfg: Config, **override) -> dict:
     """Environment keyword arguments of a config (the trainer's envs and the eval env)."""
     kwargs = dict(task=cfg.task, room_size=cfg.room_size,
-                  max_episode_steps=cfg.max_episode_steps, placement=cfg.placement,
-                  randomise_visuals=cfg.visual_randomisation)
+                  max_episode_steps=cfg.max_episode_steps, placement=cfg.placement)
     kwargs.update(override)
-    kwargs.update(optional_env_kwargs(  # boulder phases: not for another eval task
-        cfg.room_colours, cfg.camera_pitch, cfg.held_on_top,
-        cfg.boulder_phases and kwargs["task"] == "three-room"))
+    kwargs.update(VIEWS[cfg.view])
+    if cfg.curriculum == "boulders":
+        kwargs["boulder_phases"] = True
     if kwargs["task"] == "rooms":  # the other tasks have a fixed room count
         kwargs.setdefault("num_rooms", cfg.num_rooms)
     return kwargs
 
 
-def optional_env_kwargs(room_colours, camera_pitch, held_on_top, boulder_phases) -> dict:
-    """The optional look and curriculum-table settings, passed only when on so that an
-    environment built without them keeps its own defaults (trainer, evaluator and ``play``)."""
-    switches = {"room_colours": room_colours, "held_on_top": held_on_top,
-                "boulder_phases": boulder_phases}
-    kwargs = {name: True for name, on in switches.items() if on}
-    if camera_pitch:
-        kwargs["camera_pitch"] = camera_pitch
-    return kwargs
-
-
 def eval_env_kwargs(cfg: Config) -> dict:
-    """The target task: the full problem, fixed placement and look, ``eval_num_rooms`` or the
-    schedule's last room count."""
-    override = {"placement": "fixed", "randomise_visuals": False}
-    if cfg.eval_task and cfg.eval_task != cfg.task:
-        override.update(task=cfg.eval_task, max_episode_steps=None)
+    """The target task: the full problem, fixed placement, ``eval_num_rooms`` or the schedule's
+    last room count."""
+    override: dict = {"placement": "fixed"}
     if cfg.curriculum == "schedule":
         override["num_rooms"] = int(cfg.rooms_schedule[-1])
     if cfg.eval_num_rooms is not None:
@@ -74,7 +65,7 @@ def actor_specs(cfg: Config, generation: int = 0) -> list[ActorSpec]:
     ``generation`` counts the starts of a run (0, then +1 per resume): each draws new seeds."""
     specs = [_training_spec(cfg, i, generation) for i in range(cfg.actors)]
     if cfg.eval_every:
-        specs.append(ActorSpec(index=cfg.actors, streams=(), epsilon=cfg.eval_epsilon,
+        specs.append(ActorSpec(index=cfg.actors, streams=(), epsilon=EVAL_EPSILON,
                                seed=actor_seed(cfg.seed, 7000 + cfg.actors, generation),
                                env_kwargs=eval_env_kwargs(cfg)))
     return specs

@@ -13,7 +13,7 @@ CONFIGS = {
     # the full task in random rooms, the rest follow the phases (the rule counts only those)
     "curriculum+dr": {"curriculum": "adaptive", "curriculum_dr": 0.3},
 }
-NO_PHASES = {"curriculum": "none", "boulder_phases": False}
+NO_PHASES = {"curriculum": "none"}
 CPU_MINUTES = {"baseline": 15, "curriculum": 90, "any-room": 35, "curriculum+dr": 35}
 BASE = {"task": "three-room", "eval_every": 10_000, "eval_episodes": 10}
 SCALES = {
@@ -24,18 +24,16 @@ SCALES = {
               "note": "reduced for 2 CPU cores: three-room of 8x8 rooms, 400-step episodes, "
                       "12,000 updates, 1 actor and the evaluation actor, one seed; the full "
                       "task is far out of reach at this budget, watch the curriculum phase"},
-    # The cpu-three-room preset for all four (its actors, learner, camera pitched down, room
-    # colours, carried item on top, held random actions in evaluation), so that they differ only
-    # in how episodes start. The minutes are what each needs to show its result and the four
-    # end within 3 hours: the curriculum the preset's 90 (it reached the full task at 50-83
-    # minutes on held-out seeds), the baseline 15 (it found no reward in 3,200 episodes of 40
-    # minutes, nor in 6,048 episodes of 90 on held-out seed 11, nor did any undirected exploration
-    # in the explore benchmark).
+    # The cpu-three-room preset for all four (its actors, learner, clear view, and its 23 phases
+    # for the curricula), so that they differ only in how episodes start; each for the minutes it
+    # needs to show its result (the baseline finds no reward in 90), all four within 3 hours.
     "cpu": {"base": {"preset": "cpu-three-room", "task": "three-room", "eval_every": 500_000},
             "override": {"baseline": {**NO_PHASES, "minutes": CPU_MINUTES["baseline"]},
-                         "curriculum": {"minutes": CPU_MINUTES["curriculum"]},
+                         "curriculum": {"curriculum": "boulders",
+                                        "minutes": CPU_MINUTES["curriculum"]},
                          "any-room": {**NO_PHASES, "minutes": CPU_MINUTES["any-room"]},
-                         "curriculum+dr": {"minutes": CPU_MINUTES["curriculum+dr"]}},
+                         "curriculum+dr": {"curriculum": "boulders",
+                                           "minutes": CPU_MINUTES["curriculum+dr"]}},
             "seeds": 1,
             "note": "full-size three-room (16 x 16 rooms, 2,000 steps) on 2 CPU cores: the "
                     "cpu-three-room preset, minutes a run "
