@@ -351,3 +351,12 @@ def test_progress_bar_shows_phase_only_with_a_curriculum():
     assert progress_postfix(row) == {"ret": "0.25", "loss": "0.0001"}
     assert progress_postfix({**row, "phase": 3})["phase"] == "3"
     assert progress_postfix({**row, "rewarded_episodes": 12345})["rewarded"] == "12345"
+
+
+def test_a_log_file_gets_the_bars_figures_as_one_line_per_row():
+    from dqn_mine.metrics import progress_line
+
+    row = {"update": 1500, "wall_time": 90.0, "episode_return": 0.25, "loss": 1e-4,
+           "eval_return": float("nan"), "phase": 0}
+    assert progress_line(row, 300_000) == \
+        "train: 1,500/300,000 updates, 1.5 min | ret=0.25 loss=0.0001"
