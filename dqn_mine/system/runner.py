@@ -263,6 +263,10 @@ class Run:
             if done % 100 == 0:
                 bar.set_postfix(loss=f"{stats['loss']:.3g}", margin=f"{stats['margin_loss']:.3g}",
                                 refresh=False)
+            if not self.progress and done % max(1, total // 10) == 0:  # a log file: 10 lines
+                print(f"demo pre-train: {done:,}/{total:,} updates, {self.wall_time() / 60:.1f} "
+                      f"min | loss={stats['loss']:.3g} margin={stats['margin_loss']:.3g}",
+                      flush=True)
         bar.close()
         if last:
             print(f"pre-trained on the demonstrations for {done:,} updates: loss "
