@@ -226,8 +226,8 @@ def test_demonstrations_make_a_greedy_agent_deliver(tmp_path):
         summary = json.loads((tmp_path / name / "summary.json").read_text())
         rewarded[name] = (summary["rewarded_episodes"], summary["episodes"])
         if flags:   # a log file, not a terminal: the pre-training reports in ten lines
-            assert res.stdout.count("demo pre-train: ") == 10, res.stdout[-3000:]
-            assert "demo pre-train: 1,500/1,500 updates" in res.stdout
+            assert res.stderr.count("demo pre-train: ") == 10, res.stderr[-3000:]
+            assert "demo pre-train: 1,500/1,500 updates" in res.stderr
     assert rewarded["plain"][0] == 0, rewarded
     assert rewarded["demos"][0] >= 4 and rewarded["demos"][0] >= rewarded["demos"][1] / 2, \
         rewarded

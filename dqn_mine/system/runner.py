@@ -260,13 +260,15 @@ class Run:
             done += 1
             bar.update(1)
             last = stats
-            if done % 100 == 0:
-                bar.set_postfix(loss=f"{stats['loss']:.3g}", margin=f"{stats['margin_loss']:.3g}",
-                                refresh=False)
-            if not self.progress and done % max(1, total // 10) == 0:  # a log file: 10 lines
-                print(f"demo pre-train: {done:,}/{total:,} updates, {self.wall_time() / 60:.1f} "
-                      f"min | loss={stats['loss']:.3g} margin={stats['margin_loss']:.3g}",
-                      flush=True)
+            logged = not self.progress and done % max(1, total // 10) == 0  # a log file: 10 lines
+            if done % 100 == 0 or logged:
+                figures = {"loss": f"{stats['loss']:.3g}", "margin": f"{stats['margin_loss']:.3g}"}
+                bar.set_postfix(figures, refresh=False)
+                if logged:   # where the bar would be, as the training's lines
+                    print(f"demo pre-train: {done:,}/{total:,} updates, "
+                          f"{self.wall_time() / 60:.1f} min | "
+                          + " ".join(f"{k}={v}" for k, v in figures.items()),
+                          file=sys.stderr, flush=True)
         bar.close()
         if last:
             print(f"pre-trained on the demonstrations for {done:,} updates: loss "
