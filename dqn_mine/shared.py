@@ -49,7 +49,7 @@ class BlockSpec:
         return int(np.prod(self.shape, dtype=np.int64)) * np.dtype(self.dtype).itemsize
 
 
-def _human(nbytes: int) -> str:
+def human_bytes(nbytes: int) -> str:
     return f"{nbytes / 2**30:.2f} GiB" if nbytes >= 2**28 else f"{nbytes / 2**20:.1f} MiB"
 
 
@@ -66,9 +66,12 @@ def check_free_space(nbytes: int, path: str = SHM_DIR) -> None:
     """Fail early, with the remedy, if ``nbytes`` of shared memory cannot fit."""
     free = shm_free_bytes(path)
     if free is not None and nbytes > free:
+        stale = stale_bytes(path)
+        remedy = (f"`python -m dqn_mine.clean` frees {human_bytes(stale)} left by dead runs, or "
+                  if stale else "")
         raise SharedMemoryError(
-            f"the replay needs {_human(nbytes)} of shared memory but {path} has only "
-            f"{_human(free)} free: use a smaller --replay-capacity or enlarge {path} "
+            f"the replay needs {human_bytes(nbytes)} of shared memory but {path} has only "
+            f"{human_bytes(free)} free: {remedy}use a smaller --replay-capacity or enlarge {path} "
             f"(e.g. `mount -o remount,size=32G {path}` or docker --shm-size)"
         )
 
@@ -168,9 +171,44 @@ class SharedBlocks:
         self.close()
 
 
-def leftover_segments() -> list:
+def leftover_segments(path: str = SHM_DIR) -> list:
     """Names of dqn_mine segments still present in /dev/shm (tests assert this stays empty)."""
     try:
-        return sorted(n for n in os.listdir(SHM_DIR) if n.startswith(SHM_PREFIX))
+        return sorted(n for n in os.listdir(path) if n.startswith(SHM_PREFIX))
     except FileNotFoundError:
         return []
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:        # another user's live process
+        return True
+    return True
+
+
+def segment_pid(name: str) -> int | None:
+    """The pid of the process that created the segment ``dqnmine_<pid>_...``, or None."""
+    pid = name[len(SHM_PREFIX):].split("_", 1)[0]
+    return int(pid) if pid.isdigit() else None
+
+
+def stale_segments(path: str = SHM_DIR) -> list:
+    """Segments whose creator is no longer running: left behind when a whole process group,
+    resource tracker included, was killed with SIGKILL (a job scheduler, a closed container)."""
+    return [n for n in leftover_segments(path)
+            if (pid := segment_pid(n)) is not None and not _pid_alive(pid)]
+
+
+def stale_bytes(path: str = SHM_DIR) -> int:
+    """How much of ``path`` the stale segments hold."""
+    return sum(file_size(os.path.join(path, n)) for n in stale_segments(path))
+
+
+def file_size(file: str) -> int:
+    try:
+        return os.stat(file).st_size
+    except FileNotFoundError:
+        return 0

@@ -2,6 +2,8 @@
 
 import multiprocessing as mp
 import os
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -9,11 +11,13 @@ import pytest
 
 from dqn_mine.replay import ReplayLayout
 from dqn_mine.shared import (
+    SHM_DIR,
     BlockSpec,
     SharedBlocks,
     SharedMemoryError,
     check_free_space,
     leftover_segments,
+    stale_segments,
 )
 
 SPECS = [BlockSpec("x", (4, 3), "float32", np.nan), BlockSpec("n", (5,), "int64", 7),
@@ -56,6 +60,47 @@ def test_too_little_shm_gives_a_clear_error():
     with pytest.raises(SharedMemoryError):
         SharedBlocks.create([BlockSpec("huge", (1 << 50,), "uint8")])   # nothing allocated
     assert not [n for n in leftover_segments() if n.endswith("_huge")]
+
+
+def _dead_pid() -> int:
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    return proc.pid
+
+
+def _segment(name: str, nbytes: int) -> str:
+    """A segment as the kernel keeps one: a file in /dev/shm (what a SIGKILLed run leaves)."""
+    file = os.path.join(SHM_DIR, name)
+    with open(file, "wb") as f:
+        f.write(b"\0" * nbytes)
+    return file
+
+
+def test_clean_removes_segments_of_dead_runs_only():
+    dead = _segment(f"dqnmine_{_dead_pid()}_cafe0000_frames", 3 << 20)
+    live = _segment(f"dqnmine_{os.getpid()}_cafe0001_frames", 1024)
+    try:
+        stale = stale_segments()
+        assert os.path.basename(dead) in stale and os.path.basename(live) not in stale
+        with pytest.raises(SharedMemoryError, match="python -m dqn_mine.clean. frees 3.0 MiB"):
+            check_free_space(1 << 60)
+        dry = run_cli("clean", "--dry-run")
+        assert os.path.basename(dead) in dry.stdout and os.path.exists(dead)
+        out = run_cli("clean")
+        assert os.path.basename(dead) in out.stdout and "freed" in out.stdout
+        assert not os.path.exists(dead) and os.path.exists(live)   # a live run is never touched
+        assert os.path.basename(live) not in out.stdout
+    finally:
+        for file in (dead, live):
+            if os.path.exists(file):
+                os.unlink(file)
+
+
+def run_cli(module: str, *args: str) -> subprocess.CompletedProcess:
+    res = subprocess.run([sys.executable, "-m", f"dqn_mine.{module}", *args],
+                         capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0, res.stderr
+    return res
 
 
 def _child(handle, q):
