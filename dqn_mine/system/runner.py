@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import os
 import signal
 import sys
 import time
@@ -250,7 +251,17 @@ class Run:
     def pretrain(self) -> None:
         """``--demo-pretrain`` updates on the demonstrations, before any actor acts (they are
         not counted as the run's updates: the budget and the replay ratio are the actors')."""
-        total, learner = self.cfg.demo_pretrain, self.ctx.learner
+        import torch
+
+        threads = torch.get_num_threads()
+        torch.set_num_threads(os.cpu_count() or 1)   # no actor runs yet: every core is free
+        try:
+            self._pretrain_updates(self.cfg.demo_pretrain)
+        finally:
+            torch.set_num_threads(threads)
+
+    def _pretrain_updates(self, total: int) -> None:
+        learner = self.ctx.learner
         bar = self._bar(total=total, desc="demo pre-train", unit="upd")
         done, last = 0, {}
         while done < total and not self._should_stop():
