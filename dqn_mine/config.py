@@ -358,20 +358,21 @@ PRESETS: dict[str, dict[str, Any]] = {
         "prefill": 20_000, "replay_capacity": 262_144, "updates": 300_000,
         "lr": 1e-4, "target_update_interval": 1000, "publish_interval": 250,
         "eval_every": 500_000, "checkpoint_interval": 10_000,
-        "log_interval": 500, "prefill_explorer": "agent",
+        "log_interval": 500, "prefill_explorer": "agent", "demos": 200,
     },
 }
 PRESETS["cpu-three-room"] = {**PRESETS["cpu"], "task": "three-room", "curriculum": "boulders",
                              "curriculum_review": 0.5, "curriculum_review_unit": "steps",
-                             "updates": 600_000, "view": "clear", "unstick": 2}
+                             "updates": 600_000, "view": "clear", "unstick": 2, "demos": 0}
 PRESETS["cpu-rooms"] = {**PRESETS["cpu"], "task": "rooms", "updates": 600_000, "view": "clear",
-                        "unstick": 2}
+                        "unstick": 2, "demos": 0}
 # What each is for, in a line or two (``--help`` lists them).
 PRESET_REASONS = {
     "paper": "the study's configuration on two-room (a scripted walker plays the pre-fill)",
     "smoke": "a small one-room that 2 CPU cores learn in minutes",
-    "cpu": "full two-room in an hour on a few CPU cores: 2 actors x 16 envs, Ape-X epsilons "
-           "with ez and unstick, the backward curriculum, a replay ratio of 0.03",
+    "cpu": "full two-room in half an hour on a few CPU cores: 2 actors x 16 envs, Ape-X "
+           "epsilons with ez and unstick, the backward curriculum, 200 expert demonstrations "
+           "in the replay, a replay ratio of 0.03",
     "cpu-three-room": "full three-room in 90 minutes on a few CPU cores: the 23-phase table, "
                       "half the steps reviewing, the clear view",
     "cpu-rooms": "the rooms task at any --num-rooms: cpu's settings with three-room's view",
@@ -637,6 +638,8 @@ def parse_args(argv: Optional[list[str]] = None) -> Config:
             raise ConfigError(f"--preset: unknown preset {preset!r} "
                               f"(choose from {', '.join(PRESETS)})")
         base = Config(**{**PRESETS[preset], "preset": preset})
+        if "demos_from" in explicit and "demos" not in explicit:
+            explicit["demos"] = 0     # the folder's demonstrations replace the preset's
     return dataclasses.replace(base, **explicit).validate()
 
 

@@ -220,7 +220,7 @@ def test_version_2_configs_migrate_to_merged_and_removed_settings(tmp_path):
           "room_colours": True, "held_on_top": True, "unstick": True, "unstick_cycle": 2,
           "eval_held": True, "eval_unstick": True, "eval_epsilon": 0.01, "learner_queue": 4,
           "learner_precision": "auto", "actor_precision": "float32", "progress": True,
-          "ez_mu": 2.0, "eta": 1e-5, "beta0": 0.4, "max_grad_norm": 40.0}
+          "ez_mu": 2.0, "eta": 1e-5, "beta0": 0.4, "max_grad_norm": 40.0, "demos": 0}
     (tmp_path / "v2.json").write_text(json.dumps(v2))
     assert Config.from_json(tmp_path / "v2.json") == \
         parse_args(["--preset", "cpu-three-room", "--precision", "float32"])

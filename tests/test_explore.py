@@ -260,6 +260,10 @@ def test_cpu_preset_is_the_full_two_room_task():
     assert (cfg.task, cfg.room_size, cfg.max_episode_steps) == ("two-room", 16.0, None)
     assert (cfg.exploration, cfg.epsilon_schedule, cfg.n_step) == ("ez", "apex", 6)
     assert cfg.curriculum == "backward" and cfg.eval_every > 0   # judged on the full task
+    assert cfg.demos == 200 and cfg.demos_from is None
+    # a folder of recorded demonstrations replaces the preset's expert episodes
+    from_files = parse_args(["--preset", "cpu", "--demos-from", "demos/two-room"])
+    assert (from_files.demos, from_files.demos_from) == (0, "demos/two-room")
 
 
 def test_a_kit_held_from_the_start_counts_as_picked_up_only_when_taken_again():
