@@ -245,21 +245,6 @@ def test_writer_history_matches_what_it_stores(make_storage):
                                                      for j in range(t - 4, t)])
 
 
-def test_an_episode_begun_with_a_history_stores_it_and_shifts_it(make_storage):
-    """A start on the expert's path: the first frame's history is the expert's last actions,
-    each later frame's has the agent's actions shifted in."""
-    s = make_storage(history_len=4)
-    w = NStepWriter(s, 0, flush_every=2)
-    w.begin_episode(frame(0, 0), 0.0, np.array([-1, 5, 4, 3], dtype=np.int8))
-    for t in range(4):
-        w.append(q_row(t), t, 0.0, frame(0, t + 1), 0.0)
-    w.flush()
-    np.testing.assert_array_equal(s.history[:2], [[-1, 5, 4, 3], [5, 4, 3, 0]])
-    w.begin_episode(frame(0, 9), 0.0)             # the next episode starts with none
-    w.append(q_row(0), 1, 1.0, frame(0, 10), 0.0, terminated=True)
-    np.testing.assert_array_equal(s.history[5], [-1, -1, -1, -1])   # after 5 frames of the first
-
-
 def test_layout_sizes_and_lazy_frames():
     layout = ReplayLayout(num_streams=8, stream_capacity=2 ** 17)
     assert layout.capacity == 2 ** 20

@@ -38,12 +38,10 @@ class ActingCore:
         self.stuck = np.zeros(num_envs, dtype=bool)                                # [E]
 
     # -- what the network sees -----------------------------------------------------------------
-    def begin(self, j: int, obs: np.ndarray, carrying: bool,
-              history: np.ndarray | None = None) -> None:
-        """Environment ``j`` starts an episode with frame ``obs`` (and ``history``, the actions
-        that led there, where it starts on the expert's path; none at the task's start)."""
+    def begin(self, j: int, obs: np.ndarray, carrying: bool) -> None:
+        """Environment ``j`` starts an episode with frame ``obs``."""
         self.stacks[j] = 0
-        self.histories[j] = -1 if history is None else history
+        self.histories[j] = -1
         self.stuck[j] = False
         self.recent[j] = obs   # before the episode only its first frame has been seen
         self.explorer.reset(j)

@@ -65,12 +65,11 @@ class NStepWriter:
         self._oldest = self._next_frame                    # the first unpublished frame
 
     # -- the actor's calls --------------------------------------------------------------------
-    def begin_episode(self, frame, carrying, history=None) -> None:
-        """Store ``s_0`` (``history``: the actions before it, oldest first; None: none yet). An
-        unfinished previous episode is dropped (its last n transitions)."""
+    def begin_episode(self, frame, carrying) -> None:
+        """Store ``s_0``. An unfinished previous episode is dropped (its last n transitions)."""
         if self._current is not None:
             self._abandon()
-        self._hist0[:] = -1 if history is None else history
+        self._hist0.fill(-1)
         self._step0 = 0
         self._current = self._next_frame
         self._write_frame(frame, carrying)

@@ -74,7 +74,7 @@ class ActorBase:
         self._begin(j, *self.reset_env(j, seed))
 
     def reset_env(self, j: int, seed: int | None) -> tuple:
-        """(obs, info[, action history]) of environment j's next episode."""
+        """(obs, info) of environment j's next episode."""
         return self.envs[j].reset(seed=seed)
 
     def pull_weights(self) -> None:
@@ -107,9 +107,8 @@ class ActorBase:
     def after_step(self, j, q, action, reward, obs, info, terminated, truncated) -> None:
         """What a kind of actor does with a step besides acting on it."""
 
-    def _begin(self, j: int, obs: np.ndarray, info: dict,
-               history: np.ndarray | None = None) -> None:
-        self.core.begin(j, obs, info["carrying"], history)
+    def _begin(self, j: int, obs: np.ndarray, info: dict) -> None:
+        self.core.begin(j, obs, info["carrying"])
         self.returns[j], self.lengths[j] = 0.0, 0
 
     def _end_episode(self, j: int) -> None:
@@ -154,8 +153,7 @@ class Actor(ActorBase):
         self.pace = ActorPace(cfg, control)
         super().__init__(cfg, spec, control, weights, training=True, parent_pid=parent_pid)
         self.to_go = np.zeros(spec.num_envs, dtype=np.int64)   # backward: each start's
-        self.paths = [PathStarts(np.random.default_rng([spec.seed, j]), env.max_episode_steps,
-                                 cfg.history_len)
+        self.paths = [PathStarts(np.random.default_rng([spec.seed, j]), env.max_episode_steps)
                       for j, env in enumerate(self.envs)] if self.curriculum.backward else None
         self.writers = [NStepWriter(storage, stream=s) for s in spec.streams]
         self.start_envs()
@@ -175,18 +173,16 @@ class Actor(ActorBase):
 
     def reset_env(self, j: int, seed: int | None) -> tuple:
         """Backward: on the expert's path of a seed of the env's own (``seed`` is for the
-        first episode of an env that follows the task's own starts), with the expert's last
-        actions as the action history."""
+        first episode of an env that follows the task's own starts)."""
         if self.paths is None:
             return super().reset_env(j, seed)
-        start = self.paths[j].reset(self.envs[j], int(self.to_go[j]))
-        self.full[j], self.shares[j] = start.full, start.share
-        return start.obs, start.info, start.history
+        obs, info, self.full[j], self.shares[j] = self.paths[j].reset(self.envs[j],
+                                                                      int(self.to_go[j]))
+        return obs, info
 
-    def _begin(self, j: int, obs: np.ndarray, info: dict,
-               history: np.ndarray | None = None) -> None:
-        super()._begin(j, obs, info, history)
-        self.writers[j].begin_episode(obs, bool(info["carrying"]), history)
+    def _begin(self, j: int, obs: np.ndarray, info: dict) -> None:
+        super()._begin(j, obs, info)
+        self.writers[j].begin_episode(obs, bool(info["carrying"]))
 
     def step(self) -> int:
         taken = super().step()

@@ -3,15 +3,12 @@
 Every episode of every task comes with the scripted expert's solution of it. An episode that
 starts ``to_go`` steps before the expert's delivery is reset from its seed and fast-forwarded
 through the expert's first ``len(solution) - to_go`` actions, unrendered; the agent plays from
-there, with the expert's last actions as its action history (its whole input is then the
-demonstration's at that step). ``to_go`` at least the solution's length is the full task. The
-expert's steps are not the agent's: nothing of them enters the replay. Which ``to_go`` an episode
-gets is the curriculum's choice (``Curriculum.backward_start``).
+there. ``to_go`` at least the solution's length is the full task. The expert's steps are not the
+agent's: nothing of them enters the replay. Which ``to_go`` an episode gets is the curriculum's
+choice (``Curriculum.backward_start``).
 """
 
 from __future__ import annotations
-
-from typing import NamedTuple
 
 import numpy as np
 
@@ -35,29 +32,19 @@ def start_budget(to_go: int, step_limit: int) -> int:
     return min(step_limit, BUDGET_PER_STEP * to_go + BUDGET_BASE)
 
 
-class Start(NamedTuple):
-    """An episode's start on the expert's path."""
-
-    obs: np.ndarray
-    info: dict
-    full: bool              # the task's own start (to_go at least the solution's length)
-    share: float            # to_go as a share of the solution, at most 1
-    history: np.ndarray     # int8 [h]: the expert's actions before it, oldest first, -1 = none
-
-
 class PathStarts:
     """One training environment's starts on the expert's solutions of its episodes."""
 
-    def __init__(self, rng: np.random.Generator, step_limit: int, history_len: int = 0):
+    def __init__(self, rng: np.random.Generator, step_limit: int):
         self.rng = rng
-        self.history_len = history_len
         self.step_limit = step_limit        # the task's; a path start gets less
         self.seed = -1
         self.solution: list[int] = []
         self.uses_left = 0
 
-    def reset(self, env, to_go: int) -> Start:
-        """Start ``env``'s next episode ``to_go`` expert steps before the delivery."""
+    def reset(self, env, to_go: int) -> tuple[np.ndarray, dict, bool, float]:
+        """Start ``env``'s next episode ``to_go`` expert steps before the delivery: (obs, info,
+        full task?, to_go as a share of the solution, at most 1)."""
         if self.uses_left == 0:
             self._solve_new_seed(env)
         self.uses_left -= 1
@@ -66,19 +53,9 @@ class PathStarts:
         env.max_episode_steps = self.step_limit if full else start_budget(to_go,
                                                                           self.step_limit)
         obs, info = env.reset(seed=self.seed)
-        played = [] if full else self.solution[:length - to_go]
-        if played:
-            obs, info = env.fast_forward(played)
-        return Start(obs, info, full, min(1.0, to_go / length), self._history(played))
-
-    def _history(self, played: list[int]) -> np.ndarray:
-        """The expert's last ``history_len`` actions, oldest first, -1 where there were fewer:
-        the start's input is then the one the expert's demonstration has at that step."""
-        history = np.full(self.history_len, -1, dtype=np.int8)
-        recent = played[-self.history_len:] if self.history_len else []
-        if recent:
-            history[-len(recent):] = recent
-        return history
+        if not full:
+            obs, info = env.fast_forward(self.solution[:length - to_go])
+        return obs, info, full, min(1.0, to_go / length)
 
     def _solve_new_seed(self, env) -> None:
         """Draw a seed and plan its solution. A seed whose plan does not deliver within the
