@@ -19,5 +19,7 @@ PAPER_NOTE = "the study's configuration"
 
 # The study's own tasks at full size on 2 CPU cores: the cpu preset's actors, replay and learner
 # (see dqn_mine/config.py); the grid's scale bounds each run by updates or minutes so that the
-# grid ends within 3 hours on one 2-core machine.
-CPU = {"preset": "cpu", "updates": 10_000_000, "eval_every": 500_000, "eval_episodes": 10}
+# grid ends within 3 hours on one 2-core machine. No demonstrations: the grids compare the
+# study's methods (the preset's demos came after their runs).
+CPU = {"preset": "cpu", "updates": 10_000_000, "eval_every": 500_000, "eval_episodes": 10,
+       "demos": 0}
