@@ -252,15 +252,26 @@ def _label_updates(ax) -> None:
         lambda value, _: f"{value / 1000:g}k" if value else "0"))
 
 
-def _save(fig, legend_axis, out: Path, legend_size: int) -> Path:
-    """Legend on ``legend_axis``, tight layout, write ``out`` (folders made) and close."""
+def _save(fig, legend_axis, out: Path, legend_size: int, handles=None) -> Path:
+    """Legend on ``legend_axis`` (or ``handles`` below the panels), tight layout, write
+    ``out`` (folders made) and close."""
     import matplotlib.pyplot as plt
 
-    legend_axis.legend(fontsize=legend_size)
     fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out)
+    if handles is None:
+        legend_axis.legend(fontsize=legend_size)
+        fig.savefig(out_path(out))
+    else:   # below the panels: with several runs a legend inside one hides its curves
+        legend = fig.legend(handles=handles, fontsize=legend_size, loc="upper center",
+                            bbox_to_anchor=(0.5, 0.0), ncol=min(4, len(handles)),
+                            frameon=False)
+        fig.savefig(out_path(out), bbox_extra_artists=(legend,), bbox_inches="tight")
     plt.close(fig)
+    return out
+
+
+def out_path(out: Path) -> Path:
+    out.parent.mkdir(parents=True, exist_ok=True)
     return out
 
 
@@ -282,7 +293,7 @@ def _plot_progress(ax, rows: list[dict], color, label: str) -> None:
         ax.share_axis.set_ylabel("backward: start, share of the solution")
         ax.share_axis.set_ylim(-0.03, 1.03)
     ax.share_axis.plot(column(rows, "update"), column(rows, "start_share"), color=color, lw=2,
-                       ls="-.", label=f"{label} (start share)")
+                       label=f"{label} (start share)")
 
 
 def plot_runs(runs: dict, out: Path) -> Path:
@@ -290,6 +301,7 @@ def plot_runs(runs: dict, out: Path) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
+    import matplotlib.lines
     import matplotlib.pyplot as plt
     import matplotlib.ticker
 
@@ -297,35 +309,53 @@ def plot_runs(runs: dict, out: Path) -> Path:
                      for rows in runs.values())
     panels = 3 if curriculum else 2
     fig, axes = plt.subplots(1, panels, figsize=(5.2 * panels, 3.8), dpi=110)
+    handles, styles_used = [], set()
     for i, (label, rows) in enumerate(runs.items()):
         color = plt.get_cmap("tab10")(i % 10)
+        handles.append(matplotlib.lines.Line2D([], [], color=color, lw=2, label=label))
         for ax, x, scale in ((axes[0], "update", 1.0), (axes[1], "wall_time", 60.0)):
             xs = [v / scale for v in column(rows, x)]
-            ax.plot(xs, column(rows, "episode_return"), color=color, lw=2, label=label)
-            if has_values(rows, "low_eps_return"):   # runs from before it was logged lack it
-                ax.plot(xs, column(rows, "low_eps_return"), color=color, lw=1.2, ls=":",
-                        label=f"{label} (envs at epsilon <= {LOW_EPSILON:g})")
-            if _backward(rows):
-                ax.plot(xs, column(rows, "full_task_return"), color=color, lw=1.2, ls="-.",
-                        label=f"{label} (training episodes begun at the real start)")
-            if has_values(rows, "eval_return"):
-                ax.plot(xs, column(rows, "eval_return"), color=color, lw=1.5, ls="--",
-                        label=f"{label} (evaluation, full task)")
+            for name, style in _curves(rows).items():
+                ax.plot(xs, column(rows, name), color=color, **style)
+                styles_used.add(name)
         if curriculum:
             _plot_progress(axes[2], rows, color, label)
+    handles += [matplotlib.lines.Line2D([], [], color="black", label=CURVES[name][0],
+                                        **CURVES[name][1])
+                for name in CURVES if name in styles_used]
     for ax, xlabel in zip(axes, ("network updates", "wall time (minutes)")):
         ax.set_xlabel(xlabel)
         ax.set_ylabel("mean episode return")
         ax.set_ylim(-0.03, 1.03)
     if curriculum:
         axes[2].set_xlabel("network updates")
-        axes[2].set_ylabel("curriculum phase / room count")
-        axes[2].yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
+        if all(_backward(rows) for rows in runs.values()):   # no phases: only the right axis
+            axes[2].set_yticks([])
+        else:
+            axes[2].set_ylabel("curriculum phase / room count")
+            axes[2].yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
         _label_updates(axes[2])
     _label_updates(axes[0])
     for ax in axes:
         ax.grid(alpha=0.3)
-    return _save(fig, axes[0], out, legend_size=8)
+    return _save(fig, axes[0], out, legend_size=8, handles=handles)
+
+
+# A run's curves in the return panels: the run's colour, one line style each.
+CURVES = {
+    "episode_return": ("training episodes", {"lw": 2}),
+    "low_eps_return": (f"envs at epsilon <= {LOW_EPSILON:g}", {"lw": 1.2, "ls": ":"}),
+    "full_task_return": ("training episodes begun at the real start", {"lw": 1.2, "ls": "-."}),
+    "eval_return": ("evaluation, full task", {"lw": 1.5, "ls": "--"}),
+}
+
+
+def _curves(rows: list[dict]) -> dict[str, dict]:
+    """The curves a run has: older runs lack ``low_eps_return``; only backward runs start
+    episodes elsewhere than at the real start."""
+    has = {"episode_return": True, "low_eps_return": has_values(rows, "low_eps_return"),
+           "full_task_return": _backward(rows), "eval_return": has_values(rows, "eval_return")}
+    return {name: CURVES[name][1] for name in CURVES if has[name]}
 
 
 def main(argv: list[str] | None = None) -> int:
