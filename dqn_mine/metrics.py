@@ -129,10 +129,15 @@ class RateMeter:
 
 
 def progress_line(row: dict[str, float], total_updates: int) -> str:
-    """The bar's figures as one line, for a log file."""
-    figures = " ".join(f"{k}={v}" for k, v in progress_postfix(row).items())
-    return f"train: {int(row['update']):,}/{total_updates:,} updates, " \
-           f"{row['wall_time'] / 60:.1f} min | {figures}"
+    """The training bar's figures as one line, for a log file."""
+    return log_line("train", int(row["update"]), total_updates, row["wall_time"] / 60,
+                    progress_postfix(row))
+
+
+def log_line(label: str, done: int, total: int, minutes: float, figures: dict[str, str]) -> str:
+    """A progress bar as one line, where stderr is a log file and no bar is drawn."""
+    shown = " ".join(f"{k}={v}" for k, v in figures.items())
+    return f"{label}: {done:,}/{total:,} updates, {minutes:.1f} min | {shown}"
 
 
 def progress_postfix(row: dict[str, float]) -> dict[str, str]:

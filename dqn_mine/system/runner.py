@@ -23,7 +23,7 @@ from dqn_mine import checkpoint as ckpt
 from dqn_mine.config import Config, learner_threads
 from dqn_mine.demos import DemoSet
 from dqn_mine.exitcodes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
-from dqn_mine.metrics import MetricsTable, RateMeter, progress_line, progress_postfix
+from dqn_mine.metrics import MetricsTable, RateMeter, log_line, progress_line, progress_postfix
 from dqn_mine.replay.snapshot import SnapshotError, demo_streams
 from dqn_mine.system.context import RunContext
 from dqn_mine.system.curriculum import Curriculum
@@ -276,10 +276,8 @@ class Run:
                 figures = {"loss": f"{stats['loss']:.3g}", "margin": f"{stats['margin_loss']:.3g}"}
                 bar.set_postfix(figures, refresh=False)
                 if logged:   # where the bar would be, as the training's lines
-                    print(f"demo pre-train: {done:,}/{total:,} updates, "
-                          f"{self.wall_time() / 60:.1f} min | "
-                          + " ".join(f"{k}={v}" for k, v in figures.items()),
-                          file=sys.stderr, flush=True)
+                    print(log_line("demo pre-train", done, total, self.wall_time() / 60,
+                                   figures), file=sys.stderr, flush=True)
         bar.close()
         if last:
             print(f"pre-trained on the demonstrations for {done:,} updates: loss "
