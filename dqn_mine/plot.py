@@ -285,6 +285,8 @@ def _plot_progress(ax, rows: list[dict], color, label: str) -> None:
     curriculum its starts' share of the solution (1: the full task) on a right-hand axis, as
     its frontier counts expert steps, not phases."""
     if not _backward(rows):
+        if not any(column(rows, "phase")):   # no curriculum: nothing to draw here
+            return
         ax.step(column(rows, "update"), column(rows, "phase"), where="post", color=color, lw=2,
                 label=label)
         return
@@ -329,7 +331,8 @@ def plot_runs(runs: dict, out: Path) -> Path:
         ax.set_ylim(-0.03, 1.03)
     if curriculum:
         axes[2].set_xlabel("network updates")
-        if all(_backward(rows) for rows in runs.values()):   # no phases: only the right axis
+        if not any(any(column(rows, "phase")) for rows in runs.values()
+                   if not _backward(rows)):   # no phases: only the right axis
             axes[2].set_yticks([])
         else:
             axes[2].set_ylabel("curriculum phase / room count")
