@@ -260,17 +260,17 @@ def _save(fig, legend_axis, out: Path, legend_size: int, handles=None) -> Path:
     fig.tight_layout()
     if handles is None:
         legend_axis.legend(fontsize=legend_size)
-        fig.savefig(out_path(out))
+        fig.savefig(_out_path(out))
     else:   # below the panels: with several runs a legend inside one hides its curves
         legend = fig.legend(handles=handles, fontsize=legend_size, loc="upper center",
                             bbox_to_anchor=(0.5, 0.0), ncol=min(4, len(handles)),
                             frameon=False)
-        fig.savefig(out_path(out), bbox_extra_artists=(legend,), bbox_inches="tight")
+        fig.savefig(_out_path(out), bbox_extra_artists=(legend,), bbox_inches="tight")
     plt.close(fig)
     return out
 
 
-def out_path(out: Path) -> Path:
+def _out_path(out: Path) -> Path:
     out.parent.mkdir(parents=True, exist_ok=True)
     return out
 
