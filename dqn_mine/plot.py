@@ -280,15 +280,20 @@ def _backward(rows: list[dict]) -> bool:
     return any(v < 1 for v in column(rows, "start_share"))
 
 
+def _phased(rows: list[dict]) -> bool:
+    """Whether a run's curriculum has phases or room counts (not backward, not none)."""
+    return not _backward(rows) and any(column(rows, "phase"))
+
+
 def _plot_progress(ax, rows: list[dict], color, label: str) -> None:
     """A run's curriculum in the third panel: the phase or room count, or for the backward
     curriculum its starts' share of the solution (1: the full task) on a right-hand axis, as
     its frontier counts expert steps, not phases."""
-    if not _backward(rows):
-        if not any(column(rows, "phase")):   # no curriculum: nothing to draw here
-            return
+    if _phased(rows):
         ax.step(column(rows, "update"), column(rows, "phase"), where="post", color=color, lw=2,
                 label=label)
+        return
+    if not _backward(rows):   # no curriculum: nothing to draw here
         return
     if not hasattr(ax, "share_axis"):
         ax.share_axis = ax.twinx()
@@ -331,8 +336,7 @@ def plot_runs(runs: dict, out: Path) -> Path:
         ax.set_ylim(-0.03, 1.03)
     if curriculum:
         axes[2].set_xlabel("network updates")
-        if not any(any(column(rows, "phase")) for rows in runs.values()
-                   if not _backward(rows)):   # no phases: only the right axis
+        if not any(_phased(rows) for rows in runs.values()):   # only the right axis
             axes[2].set_yticks([])
         else:
             axes[2].set_ylabel("curriculum phase / room count")
