@@ -29,11 +29,9 @@ from dqn_mine.replay.writer import FLUSH_EVERY
 DEVICES = ("auto", "cpu", "cuda")
 PRECISIONS = ("auto", "float32", "bfloat16")
 EPSILON_SCHEDULES = ("fixed", "apex")
-CURRICULA = ("none", "adaptive", "boulders", "schedule", "backward")
-PHASED_CURRICULA = ("adaptive", "boulders")   # those that start episodes in phases
+CURRICULA = ("none", "adaptive", "schedule", "backward")
 EXPLORATIONS = ("epsilon", "ez")
 PREFILL_EXPLORERS = ("agent", "bump-and-press")
-REVIEW_UNITS = ("episodes", "steps")
 
 
 DIFFERENCES_KEY = "differs_from_preset"   # in config.json: what the flags changed
@@ -67,9 +65,7 @@ class Config:
                    "on top (training and evaluation alike)", tuple(VIEWS))
     # -- curriculum ----------------------------------------------------------------------------
     curriculum: str = _f("none", "adaptive: three-room's phases 6->1, one harder when the "
-                         "rolling return passes the threshold; boulders: the same through "
-                         "three-room's 23 phases (starts near, facing and holding each "
-                         "doorway's boulder, and with it cleared, inserted); schedule: room "
+                         "rolling return passes the threshold; schedule: room "
                          "counts by share of updates; backward (every task): start on the "
                          "expert's solution of each episode, d steps before its delivery, d "
                          "growing by --backward-step as the agent succeeds", CURRICULA)
@@ -80,13 +76,6 @@ class Config:
     curriculum_review: float = _f(0.0, "adaptive and backward curricula: share of episodes that "
                                   "start in an easier phase already passed, or nearer the "
                                   "reward than the backward frontier (0 = the study's rule)")
-    curriculum_review_unit: str = _f("episodes", "what --curriculum-review and --curriculum-dr "
-                                     "are shares of: episodes (a random draw per episode), or "
-                                     "steps (an actor reviews while its review episodes played "
-                                     "fewer than that share of the steps since the last phase "
-                                     "switch, and randomises while its randomised episodes "
-                                     "played fewer than that share of all its steps)",
-                                     REVIEW_UNITS)
     curriculum_dr: float = _f(0.0, "adaptive curriculum with domain randomisation: share of "
                               "episodes that start as the full task with --placement any-room's "
                               "random rooms instead of in a phase (they do not count towards "
@@ -259,7 +248,7 @@ class Config:
 # -- saved configs of older versions -----------------------------------------------------------
 # config.json and every checkpoint carry VERSION_KEY; a config without it is version 1.
 VERSION_KEY = "config_version"
-CONFIG_VERSION = 3
+CONFIG_VERSION = 4
 # Settings version 2 removed (measured and rejected, or used by no preset), with the value at
 # which each changed nothing. A run that used another value cannot be continued as it was.
 REMOVED_IN_2 = {"episode_order": "ended", "curriculum_steps": None, "target_update_early": None,
@@ -279,6 +268,8 @@ def migrate(data: dict[str, Any], where: str = "config") -> dict[str, Any]:
         data = _from_version_1(data, where)
     if version <= 2:
         data = _from_version_2(data, where)
+    if version <= 3:
+        data = _from_version_3(data, where)
     return data
 
 
@@ -331,6 +322,20 @@ def _from_version_2(data: dict[str, Any], where: str) -> dict[str, Any]:
     return data
 
 
+# Version 4 removed three-room's 23-phase table (the backward curriculum with demonstrations
+# replaced it, docs/backward.md) and the review unit only its preset used.
+REMOVED_IN_4 = {"curriculum_review_unit": "episodes"}
+
+
+def _from_version_3(data: dict[str, Any], where: str) -> dict[str, Any]:
+    if data.get("curriculum") == "boulders":
+        raise ConfigError(f"{where}: a config with curriculum = 'boulders' (three-room's 23 "
+                          "phases), which version 4 removed; continue it with the dqn_mine it "
+                          "was made with")
+    _drop_removed(data, REMOVED_IN_4, 3, where)
+    return data
+
+
 def _view_of(look: dict[str, Any], where: str) -> str:
     """The view whose environment settings a version 2 config's look settings are."""
     for name, kwargs in VIEWS.items():
@@ -361,11 +366,9 @@ PRESETS: dict[str, dict[str, Any]] = {
         "log_interval": 500, "prefill_explorer": "agent", "demos": 200,
     },
 }
-PRESETS["cpu-three-room"] = {**PRESETS["cpu"], "task": "three-room", "curriculum": "boulders",
-                             "curriculum_review": 0.5, "curriculum_review_unit": "steps",
-                             "updates": 600_000, "view": "clear", "unstick": 2, "demos": 0}
-PRESETS["cpu-rooms"] = {**PRESETS["cpu"], "task": "rooms", "updates": 600_000, "view": "clear",
-                        "unstick": 2, "demos": 0}
+PRESETS["cpu-three-room"] = {**PRESETS["cpu"], "task": "three-room", "updates": 600_000,
+                             "view": "clear", "unstick": 2}
+PRESETS["cpu-rooms"] = {**PRESETS["cpu-three-room"], "task": "rooms", "demos": 0}
 # What each is for, in a line or two (``--help`` lists them).
 PRESET_REASONS = {
     "paper": "the study's configuration on two-room (a scripted walker plays the pre-fill)",
@@ -373,8 +376,8 @@ PRESET_REASONS = {
     "cpu": "full two-room in half an hour on a few CPU cores: 2 actors x 16 envs, Ape-X "
            "epsilons with ez and unstick, the backward curriculum, 200 expert demonstrations "
            "in the replay, a replay ratio of 0.03",
-    "cpu-three-room": "full three-room in 90 minutes on a few CPU cores: the 23-phase table, "
-                      "half the steps reviewing, the clear view",
+    "cpu-three-room": "full three-room in 90 minutes on a few CPU cores: cpu's settings "
+                      "with the clear view and two-frame loops unstuck",
     "cpu-rooms": "the rooms task at any --num-rooms: cpu's settings with three-room's view",
 }
 
@@ -484,18 +487,18 @@ def _task_problems(c: Config) -> list[str]:
         p.append(f"--max-episode-steps must be at least 1, got {c.max_episode_steps}")
     if not 0.0 <= c.curriculum_dr < 1.0:
         p.append(f"--curriculum-dr must be in [0, 1), got {c.curriculum_dr}")
-    if c.curriculum_dr and c.curriculum not in PHASED_CURRICULA:
-        p.append("--curriculum-dr applies to --curriculum adaptive or boulders only (for domain "
+    if c.curriculum_dr and c.curriculum != "adaptive":
+        p.append("--curriculum-dr applies to --curriculum adaptive only (for domain "
                  "randomisation alone use --placement any-room)")
     if c.task == "rooms" and not 2 <= c.num_rooms <= MAX_ROOMS:
         p.append(f"--num-rooms must be in 2..{MAX_ROOMS} for the rooms task, got {c.num_rooms}")
     if c.task != "rooms" and c.num_rooms != _field("num_rooms").default:
         p.append(f"--num-rooms applies to --task rooms only ({c.task} has its own room count)")
-    if c.curriculum in PHASED_CURRICULA and c.placement != "fixed":
-        p.append(f"--curriculum {c.curriculum} sets the start of each episode, so it needs "
+    if c.curriculum == "adaptive" and c.placement != "fixed":
+        p.append("--curriculum adaptive sets the start of each episode, so it needs "
                  "--placement fixed")
-    if c.curriculum in PHASED_CURRICULA and c.task != "three-room":
-        p.append(f"--curriculum {c.curriculum} needs --task three-room, got {c.task}")
+    if c.curriculum == "adaptive" and c.task != "three-room":
+        p.append(f"--curriculum adaptive needs --task three-room, got {c.task}")
     if c.curriculum == "schedule" and (c.task != "rooms" or not c.rooms_schedule
                                     or min(c.rooms_schedule) < 2
                                     or max(c.rooms_schedule) > MAX_ROOMS):

@@ -118,8 +118,6 @@ def make_env(args: argparse.Namespace):
         kwargs["phase"] = args.phase
     kwargs.update(room_colours=args.room_colours, camera_pitch=args.camera_pitch,
                   held_on_top=args.held_on_top)
-    if args.boulder_phases:
-        kwargs["boulder_phases"] = True
     if args.max_steps is not None:
         kwargs["max_episode_steps"] = args.max_steps
     return MineRescueEnv(**kwargs)
@@ -197,8 +195,6 @@ def add_episode_arguments(ap: argparse.ArgumentParser, defaults: dict | None = N
     ap.add_argument("--placement", default=None, help="fixed or any-room (domain randomisation)")
     ap.add_argument("--phase", type=int, default=None,
                     help="curriculum phase: 1..6 of three-room")
-    ap.add_argument("--boulder-phases", action="store_true",
-                    help="three-room: --phase counts the twenty-three boulder phases (as train's)")
     ap.add_argument("--visual-randomisation", action="store_true",
                     help="random light, wall colour and field of view")
     ap.add_argument("--room-colours", action=argparse.BooleanOptionalAction, default=None,

@@ -11,6 +11,7 @@ from dqn_mine.agent.explore import Explorer
 from dqn_mine.agent.network import DuelingQNetwork
 from dqn_mine.agent.policy import AgentPolicy
 from dqn_mine.env import MineRescueEnv
+from dqn_mine.env.expert import solve
 from dqn_mine.env.interface import FRAME_SHAPE
 from dqn_mine.system.control import Episode
 from dqn_mine.system.episodes import EpisodeStats
@@ -69,13 +70,24 @@ def test_a_frame_back_within_the_cycle_counts_as_stuck(cycle):
     assert core.stuck[0]
 
 
+def where_the_expert_puts_a_boulder_down(env, seed: int):
+    """(obs, info) of the state where the expert, playing its solution of ``seed``, is about
+    to put a held boulder down."""
+    plan = solve(env, seed, env.max_episode_steps)
+    obs, info = env.reset(seed=seed)
+    for action in plan:
+        if info["carrying"] and not info["carrying_kit"] and action == 4:
+            return obs, info
+        obs, _, _, _, info = env.step(action)
+    pytest.fail("the expert's solution never puts a boulder down")
+
+
 def test_putting_a_held_boulder_down_and_up_again_is_a_two_step_loop():
     """In the real mine, action 4 pressed again and again while holding a boulder puts it down
     and takes it up: the frames alternate, which a cycle of 2 catches and a cycle of 1 misses.
     So does a left turn undone by a right one."""
-    env = MineRescueEnv(task="three-room", phase=9, boulder_phases=True)
-    obs, info = env.reset(seed=3)
-    assert info["carrying"]
+    env = MineRescueEnv(task="three-room")
+    obs, info = where_the_expert_puts_a_boulder_down(env, seed=3)
     cores = {k: core_of(num_envs=1, frame_stack=1, unstick=True, cycle=k) for k in (1, 2)}
     for core in cores.values():
         core.begin(0, obs, info["carrying"])

@@ -165,23 +165,3 @@ def test_actor_starts_episodes_in_the_shared_phase_and_records_them():
         for _ in range(26):
             actor.step()
         assert [env.phase for env in actor.envs] == [1, 1]
-
-
-def test_actor_counts_the_steps_of_its_finished_episodes_for_review_by_steps():
-    """The actor tells its curriculum every finished episode's length: all of them, and those
-    of the review episodes (started in a phase easier than the shared one)."""
-    cfg = dataclasses.replace(Config(**PRESETS["cpu"], preset="cpu"), actors=1,
-                              envs_per_actor=4, replay_capacity=4096, eval_every=0,
-                              task="three-room", curriculum="adaptive", max_episode_steps=20,
-                              curriculum_review=0.5, curriculum_review_unit="steps").validate()
-    net = DuelingQNetwork(frame_stack=cfg.frame_stack, history_len=cfg.history_len)
-    with in_process_actor(cfg, net, phase=4) as actor:
-        for _ in range(80):
-            actor.step()
-        records = actor.control.drain_episodes()
-        assert len(records) >= 12
-        cur = actor.curriculum
-        assert cur.played_steps == sum(e.length for e in records)
-        assert cur.review_steps == sum(e.length for e in records if e.phase > 4)
-        assert (cur.all_steps, cur.dr_steps) == (cur.played_steps, 0)   # no DR episodes
-        assert {e.phase for e in records} <= {4, 5, 6} and any(e.phase > 4 for e in records)

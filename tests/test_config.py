@@ -119,14 +119,13 @@ BAD = [
     (["--task", "rooms", "--num-rooms", "1"], "--num-rooms"),
     (["--curriculum", "adaptive", "--task", "one-room"], "three-room"),
     (["--curriculum", "adaptive", "--task", "two-room"], "needs --task three-room"),
-    (["--curriculum", "boulders", "--task", "two-room"], "needs --task three-room"),
+    (["--curriculum", "boulders", "--task", "three-room"], "--curriculum"),
     (["--curriculum", "schedule", "--task", "rooms", "--rooms-schedule", "1", "3"],
      "--rooms-schedule"),
     (["--prefill", "-1"], "--prefill"),
     (["--minutes", "0"], "--minutes"),
     (["--task", "three-room", "--curriculum-dr", "0.5"], "--curriculum-dr"),
     (["--preset", "cpu-three-room", "--curriculum-dr", "1.0"], "--curriculum-dr"),
-    (["--curriculum-review-unit", "transitions"], "--curriculum-review-unit"),
     (["--exploration", "boltzmann"], "--exploration"),
     (["--task", "two-room", "--eval-num-rooms", "5"], "--eval-num-rooms"),
     (["--task", "rooms", "--eval-num-rooms", "13"], "--eval-num-rooms"),
@@ -209,18 +208,17 @@ def test_saved_configs_carry_their_version_and_older_ones_migrate(tmp_path):
 
 def test_version_2_configs_migrate_to_merged_and_removed_settings(tmp_path):
     """Version 3 merged the look settings into --view, the two precisions into one, unstick
-    and its cycle into one count, the boulder phases into a curriculum, and made constants of
-    settings no preset changed; a version 2 run with another value fails in one line."""
+    and its cycle into one count, and made constants of settings no preset changed; a version 2
+    run with another value fails in one line."""
     from dqn_mine.config import VERSION_KEY
 
     v2 = {**{k: v for k, v in PRESETS["cpu"].items() if k != "unstick"},
           VERSION_KEY: 2, "preset": "cpu-three-room", "task": "three-room",
-          "curriculum": "adaptive", "boulder_phases": True, "curriculum_review": 0.5,
-          "curriculum_review_unit": "steps", "updates": 600_000, "camera_pitch": 15.0,
+          "updates": 600_000, "camera_pitch": 15.0,
           "room_colours": True, "held_on_top": True, "unstick": True, "unstick_cycle": 2,
           "eval_held": True, "eval_unstick": True, "eval_epsilon": 0.01, "learner_queue": 4,
           "learner_precision": "auto", "actor_precision": "float32", "progress": True,
-          "ez_mu": 2.0, "eta": 1e-5, "beta0": 0.4, "max_grad_norm": 40.0, "demos": 0}
+          "ez_mu": 2.0, "eta": 1e-5, "beta0": 0.4, "max_grad_norm": 40.0}
     (tmp_path / "v2.json").write_text(json.dumps(v2))
     assert Config.from_json(tmp_path / "v2.json") == \
         parse_args(["--preset", "cpu-three-room", "--precision", "float32"])
@@ -232,6 +230,26 @@ def test_version_2_configs_migrate_to_merged_and_removed_settings(tmp_path):
         assert "\n" not in str(info.value)
     (tmp_path / "v2.json").write_text(json.dumps({**v2, "unstick": False}))
     assert Config.from_json(tmp_path / "v2.json").unstick == 0
+
+
+@pytest.mark.parametrize("saved,fragment", [
+    ({"config_version": 2, "curriculum": "adaptive", "boulder_phases": True}, "'boulders'"),
+    ({"config_version": 3, "curriculum": "boulders"}, "'boulders'"),
+    ({"config_version": 3, "curriculum": "adaptive", "curriculum_review_unit": "steps"},
+     "version 3 config with curriculum_review_unit"),
+])
+def test_runs_of_the_removed_phase_table_cannot_be_continued(tmp_path, saved, fragment):
+    """Version 4 removed three-room's 23-phase table and its review unit: such a run fails in
+    one line; one that reviewed by episodes (the unit's neutral value) loads."""
+    base = {"task": "three-room", "curriculum_review": 0.5}
+    (tmp_path / "old.json").write_text(json.dumps({**base, **saved}))
+    with pytest.raises(ConfigError, match=fragment) as info:
+        Config.from_json(tmp_path / "old.json")
+    assert "\n" not in str(info.value)
+    neutral = {**base, "config_version": 3, "curriculum": "adaptive",
+               "curriculum_review_unit": "episodes"}
+    (tmp_path / "old.json").write_text(json.dumps(neutral))
+    assert Config.from_json(tmp_path / "old.json").curriculum_review == 0.5
 
 
 @pytest.mark.parametrize("content,fragment", [

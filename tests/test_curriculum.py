@@ -54,16 +54,14 @@ def test_adaptive_curriculum_starts_easiest_and_advances_one_phase_per_full_wind
     assert cur.phase == 5 and cur.phase_return == 0.5
 
 
-def test_three_room_preset_starts_at_the_easiest_boulder_phase_and_its_envs_know_them():
+def test_three_room_preset_is_cpu_with_the_clear_view_and_the_adaptive_one_starts_at_6():
     cfg = parse_args(["--preset", "cpu-three-room"])
-    assert (cfg.task, cfg.curriculum, cfg.view, cfg.unstick) == ("three-room", "boulders",
-                                                                 "clear", 2)
-    assert (cfg.curriculum_review, cfg.curriculum_review_unit) == (0.5, "steps")
     cpu = parse_args(["--preset", "cpu"])                       # two-room's results keep theirs
+    assert (cfg.task, cfg.view, cfg.unstick, cfg.updates) == ("three-room", "clear", 2, 600_000)
     assert (cpu.unstick, cpu.view) == (1, "study")
-    assert Curriculum(cfg).phase == 23
-    assert actor_specs(cfg)[0].env_kwargs["boulder_phases"] is True
-    assert eval_env_kwargs(cfg)["boulder_phases"] is True    # harmless: it plays phase 1
+    same = ("curriculum", "curriculum_review", "demos", "backward_step", "lr", "replay_ratio")
+    assert {k: getattr(cfg, k) for k in same} == {k: getattr(cpu, k) for k in same}
+    assert cfg.curriculum == "backward" and cfg.demos > 0
     assert Curriculum(parse_args(["--task", "three-room", "--curriculum", "adaptive"])).phase == 6
 
 
@@ -204,54 +202,22 @@ def test_review_starts_a_share_of_episodes_in_easier_phases():
     assert rng.bit_generator.state == state, "without review no random number is drawn"
 
 
-def _review_share(unit: str, current_steps: int, review_steps: int) -> tuple[float, float]:
-    """One actor's episodes in phase 2 of three-room with half of them (or half of the steps)
-    reviewing: current-phase episodes fail at ``current_steps``, reviewed ones succeed in
-    ``review_steps``. Returns (share of episodes, share of steps) that reviewed."""
+def test_review_starts_that_share_of_the_episodes_in_passed_phases():
+    """In phase 2 of three-room with --curriculum-review 0.5, about half of the episodes start
+    in an easier phase already passed (3..6, uniformly)."""
     import numpy as np
 
     cfg = parse_args(["--task", "three-room", "--curriculum", "adaptive",
-                      "--curriculum-review", "0.5", "--curriculum-review-unit", unit])
+                      "--curriculum-review", "0.5"])
     cur, rng = Curriculum(cfg), np.random.default_rng(0)
-    episodes, steps = [], []
+    phases = []
     for _ in range(2_000):
         phase, settings = cur.episode_start(2, 0, rng)
         assert settings["phase"] == phase
-        length = review_steps if phase > 2 else current_steps
-        cur.played(phase, length)
-        episodes.append(phase > 2)
-        steps.append(length * (phase > 2))
-    return float(np.mean(episodes)), sum(steps) / (cur.played_steps or 1)
-
-
-def test_review_by_steps_gives_passed_phases_that_share_of_the_steps():
-    """A new phase's failures run long (here 1,000 steps), a passed phase's successes are short:
-    by episodes half the episodes are only ~9% of the steps; by steps, half the steps."""
-    by_episodes = _review_share("episodes", current_steps=1000, review_steps=100)
-    assert abs(by_episodes[0] - 0.5) < 0.04 and abs(by_episodes[1] - 100 / 1100) < 0.02
-    by_steps = _review_share("steps", current_steps=1000, review_steps=100)
-    assert abs(by_steps[1] - 0.5) < 0.01 and by_steps[0] > 0.85
-    # equal lengths: both units agree
-    assert abs(_review_share("steps", 300, 300)[0] - 0.5) < 0.01
-
-
-def test_review_by_steps_counts_from_the_last_phase_switch():
-    import numpy as np
-
-    cfg = parse_args(["--task", "three-room", "--curriculum", "adaptive",
-                      "--curriculum-review", "0.5", "--curriculum-review-unit", "steps"])
-    cur, rng = Curriculum(cfg), np.random.default_rng(0)
-    state = rng.bit_generator.state
-    assert cur.episode_start(6, 0, rng)[0] == 6      # the easiest phase: nothing to review
-    cur.played(6, 5_000)
-    assert cur.episode_start(5, 0, rng)[0] == 5, "the switch starts a new count"
-    assert (cur.played_steps, cur.review_steps) == (0, 0)
-    cur.played(6, 200)      # an episode started before the switch: review for phase 5
-    cur.played(5, 300)
-    assert cur.episode_start(5, 0, rng)[0] == 6      # 200 < 0.5 * 500: review
-    cur.played(6, 100)
-    assert cur.episode_start(5, 0, rng)[0] == 5      # 300 = 0.5 * 600: not below, no review
-    assert rng.bit_generator.state == state, "the decision draws no random number"
+        phases.append(phase)
+    phases = np.array(phases)
+    assert abs(np.mean(phases > 2) - 0.5) < 0.04
+    assert set(phases) == {2, 3, 4, 5, 6}
 
 
 def test_phase_holds_when_returns_stay_below_threshold(tmp_path):
@@ -325,18 +291,15 @@ def test_curriculum_dr_starts_a_share_of_episodes_as_the_randomised_full_task():
     from dqn_mine.env import MineRescueEnv
     from dqn_mine.system.curriculum import DR_PHASE
 
-    cfg = parse_args(["--preset", "cpu-three-room", "--curriculum-dr", "0.3",
-                      "--curriculum-review-unit", "episodes", "--curriculum-review", "0"])
+    cfg = parse_args(["--task", "three-room", "--curriculum", "adaptive", "--curriculum-dr", "0.3"])
     cur, rng = Curriculum(cfg), np.random.default_rng(0)
-    starts = [cur.episode_start(18, 0, rng) for _ in range(4_000)]
+    starts = [cur.episode_start(3, 0, rng) for _ in range(4_000)]
     dr = [settings for phase, settings in starts if phase == DR_PHASE]
     assert abs(len(dr) / len(starts) - 0.3) < 0.025
     assert all(s == {"phase": None, "placement": "any-room"} for s in dr)
-    assert all(s == {"phase": 18, "placement": "fixed"} for p, s in starts if p != DR_PHASE)
-    cur.played(DR_PHASE, 2_000)     # outside the review count
-    assert cur.played_steps == 0
+    assert all(s == {"phase": 3, "placement": "fixed"} for p, s in starts if p != DR_PHASE)
     # an actor's env built for the fixed task takes both kinds of start, episode by episode
-    env = MineRescueEnv(task="three-room", boulder_phases=True)
+    env = MineRescueEnv(task="three-room")
     rooms = set()
     for seed, (phase, settings) in enumerate(starts[:40]):
         for name, value in settings.items():
@@ -346,44 +309,6 @@ def test_curriculum_dr_starts_a_share_of_episodes_as_the_randomised_full_task():
             rooms.add((info["agent_room"], info["kit_room"], info["miner_room"]))
             assert not info["carrying"]
         else:
-            assert info["agent_room"] == 2 and info["miner_room"] == 0   # phase 18: room 2
+            assert info["agent_room"] == 2 and info["miner_room"] == 0   # phase 3: room 2
     env.close()
     assert len(rooms) >= 4 and rooms != {(0, 2, 0)}
-
-
-def test_curriculum_dr_by_steps_gives_randomised_episodes_that_share_of_the_steps():
-    """Randomised full tasks fail at 2,000 steps, the phase's episodes end sooner: by episodes
-    30% of them are ~52% of the steps; by steps (the preset's unit) 30% of the steps, with no
-    random number drawn for the decision, over the actor's whole run (no reset at a switch)."""
-    import numpy as np
-
-    from dqn_mine.system.curriculum import DR_PHASE
-
-    cfg = parse_args(["--preset", "cpu-three-room", "--curriculum-dr", "0.3"])
-    assert cfg.curriculum_review_unit == "steps"
-    cur, rng = Curriculum(cfg), np.random.default_rng(0)
-    dr_steps = all_steps = 0
-    for i in range(3_000):
-        phase, _ = cur.episode_start(17 if i < 1_500 else 16, 0, rng)
-        length = 2_000 if phase == DR_PHASE else 800
-        cur.played(phase, length)
-        dr_steps += length * (phase == DR_PHASE)
-        all_steps += length
-    assert (cur.dr_steps, cur.all_steps) == (dr_steps, all_steps)
-    assert abs(dr_steps / all_steps - 0.3) < 0.01
-    by_episodes = Curriculum(parse_args(["--preset", "cpu-three-room", "--curriculum-dr", "0.3",
-                                         "--curriculum-review-unit", "episodes"]))
-    shares = []
-    for _ in range(3_000):
-        phase, _ = by_episodes.episode_start(17, 0, rng)
-        shares.append(2_000 if phase == DR_PHASE else 0)
-        by_episodes.played(phase, 2_000 if phase == DR_PHASE else 800)
-    assert abs(sum(shares) / by_episodes.all_steps - 0.3 * 2000 / (0.3 * 2000 + 0.7 * 800)) < 0.03
-    no_review = Curriculum(parse_args(["--preset", "cpu-three-room", "--curriculum-dr", "0.3",
-                                       "--curriculum-review", "0"]))
-    no_review.played(16, 800)
-    state = rng.bit_generator.state
-    assert no_review.episode_start(16, 0, rng)[0] == DR_PHASE     # 0 < 0.3 * 800
-    no_review.played(DR_PHASE, 2_000)
-    assert no_review.episode_start(16, 0, rng)[0] == 16           # 2,000 >= 0.3 * 2,800
-    assert rng.bit_generator.state == state, "the decision draws no random number"

@@ -457,15 +457,6 @@ class MineEnv(gym.Env):
         self.agent_x, self.agent_z = self._random_spot(AGENT_RADIUS, room, DOOR_CLEARANCE)
         self.heading = self._rng.randrange(HEADINGS)
 
-    def place_agent_near(self, room: int, point: tuple[float, float], near: float,
-                         far: float) -> None:
-        """The agent at a random free spot of ``room`` between ``near`` and ``far`` units from
-        ``point`` (an item's centre, a doorway's), facing anywhere (doorways may be closer than
-        usual)."""
-        self.agent_x, self.agent_z = self._random_spot(AGENT_RADIUS, room, 0.0,
-                                                       ring=(point, near, far))
-        self.heading = self._rng.randrange(HEADINGS)
-
     def place_agent_facing(self, room: int, item: Entity, dist: float | None = None) -> None:
         """The agent in ``room``, ``dist`` from ``item``'s centre (default: just clear of it),
         facing it: one press of action 4 takes it. The heading is drawn among those that allow
@@ -493,11 +484,8 @@ class MineEnv(gym.Env):
         return tuple(self._rng.randrange(n) for _ in range(count))
 
     def _random_spot(self, radius: float, room: int, door_clearance: float,
-                     exclude: Entity | None = None,
-                     ring: tuple[tuple[float, float], float, float] | None = None
-                     ) -> tuple[float, float]:
-        """A uniformly random spot of ``room`` away from walls, doorways and other entities;
-        with ``ring`` = (point, near, far) also between ``near`` and ``far`` from ``point``."""
+                     exclude: Entity | None = None) -> tuple[float, float]:
+        """A uniformly random spot of ``room`` away from walls, doorways and other entities."""
         m = self.layout.rooms[room]
         margin = radius + 0.3
         doors = [d.center for d in self.layout.doors]
@@ -507,8 +495,6 @@ class MineEnv(gym.Env):
         for _ in range(1000):
             x = rand(m.x0 + margin, m.x1 - margin)
             z = rand(m.z0 + margin, m.z1 - margin)
-            if ring is not None and not ring[1] <= math.dist((x, z), ring[0]) <= ring[2]:
-                continue
             if any((x - dx) ** 2 + (z - dz) ** 2 < door_clearance ** 2 for dx, dz in doors):
                 continue
             if any((x - ex) ** 2 + (z - ez) ** 2 < rr for ex, ez, rr in others):

@@ -22,16 +22,6 @@ tasks have none):
 | 4     | agent in room 2 carrying the kit; both boulders moved aside        |
 | 5     | agent in room 1 carrying the kit; both boulders moved aside        |
 | 6     | agent in room 0 (with the miner) carrying the kit; both aside      |
-
-``three-room`` with ``boulder_phases=True`` (twenty-three phases, the study's six renumbered 23,
-22, 21, 18, 10, 1): 1 the full task; 2 the agent in room 0, 2-4 units from the boulder of doorway
-0-1; 3 in room 0 facing that boulder within reach; 4 in room 0 holding it; 5 in room 0 with
-doorway 0-1 cleared; 6 in room 0 holding that boulder, 2-4 units from its doorway; 7 in room 0,
-2-4 units from that doorway cleared; 8 the same with doorway 1-2 cleared too; 9 in room 1
-holding the boulder of doorway 0-1; 10 the study's phase 2; 11-17 the same seven starts for
-doorway 1-2 (doorway 0-1 cleared; 17 in room 2 holding its boulder); 18 the study's phase 3; 19
-in room 2, 2-4 units from the kit (both doorways cleared); 20 facing the kit in reach and in
-view; 21-23 the study's phases 4-6.
 """
 
 from __future__ import annotations
@@ -55,12 +45,6 @@ class Phase:
     agent_room: int
     boulders_aside: int   # how many doorways (in chain order) are already cleared
     carrying_kit: bool
-    holding_boulder: bool = False   # the next blocked doorway's boulder is in the agent's hand
-    near_boulder: bool = False      # the agent starts a few steps from the next blocked doorway
-    near_kit: bool = False          # the agent starts a few steps from the kit
-    facing_boulder: bool = False    # the agent faces the next blocked doorway's boulder, in reach
-    facing_kit: bool = False        # the agent faces the kit, in reach and in view
-    near_doorway: bool = False      # the agent starts a few steps from its room's doorway on
 
 
 PHASES = {
@@ -71,57 +55,12 @@ PHASES = {
     5: Phase(1, 2, True),
     6: Phase(0, 2, True),
 }
-# three-room with ``boulder_phases=True``: the study's six phases (here 23, 22, 21, 18, 10, 1) with
-# seven steps inserted before each phase that must clear a doorway (the boulder in hand one room
-# further on, the doorway cleared, the same a few steps from it, its boulder in hand there and
-# anywhere in the room, a start facing it within reach, a start a few steps from it; doorway 0-1
-# has an eighth, with the doorway beyond cleared too), and starts facing the kit and a few steps
-# from it before the first phase that must take it. Each start fixes a stall seen in a run, where
-# a step asked for two new skills at once; the runs are in docs/three_room.md.
-
-
-def _doorway_phases(door: int, doors: int) -> list[Phase]:
-    """The starts that teach clearing doorway ``door`` of a chain of ``doors`` (0: rooms 0-1),
-    hardest first: 2-4 units from its boulder, facing it, holding it, it cleared, holding it 2-4
-    units from the doorway, it cleared and 2-4 units from the doorway, the same with every
-    doorway beyond it cleared too (where there is one), holding its boulder one room further on
-    (all in room ``door`` but the last)."""
-    beyond = [Phase(door, doors, False, near_doorway=True)] if door + 1 < doors else []
-    return [Phase(door, door, False, near_boulder=True),
-            Phase(door, door, False, facing_boulder=True),
-            Phase(door, door, False, holding_boulder=True),
-            Phase(door, door + 1, False),
-            Phase(door, door, False, holding_boulder=True, near_doorway=True),
-            Phase(door, door + 1, False, near_doorway=True),
-            *beyond,
-            Phase(door + 1, door, False, holding_boulder=True)]
-
-
-THREE_ROOM_BOULDER_PHASES = dict(enumerate(
-    [Phase(0, 0, False)] + _doorway_phases(0, 2)                   # 1 the full task, 2-9
-    + [Phase(1, 1, False)] + _doorway_phases(1, 2)                 # 10 the study's 2, 11-17
-    + [Phase(2, 2, False), Phase(2, 2, False, near_kit=True),      # 18 the study's 3, 19
-       Phase(2, 2, False, facing_kit=True),                        # 20
-       Phase(2, 2, True), Phase(1, 2, True), Phase(0, 2, True)],   # 21-23 the study's 4-6
-    start=1))
-NEAR_BOULDER = (2.0, 4.0)   # distance of the agent from the boulder (or kit) it starts near
-# Facing the kit: 1.75 units centre to centre, inside action 4's reach (to 1.95) and far enough
-# for the kit to show in the bottom rows of the view (~20 red pixels; none within 1.3 units,
-# where the floor in view begins beyond it).
-KIT_FACING_DISTANCE = 1.75
 FULL_TASK = PHASES[1]        # phase 1 of every table: no boulder moved, no item in hand
 TASK_PHASES = {"three-room": PHASES}
-BOULDER_PHASES = {"three-room": THREE_ROOM_BOULDER_PHASES}
 
 
-def phase_table(task: str, boulder_phases: bool = False) -> dict[int, Phase]:
-    """The curriculum phases of ``task`` (1 = the full task); ``boulder_phases`` picks the
-    finer table of a task that has one (three-room)."""
-    if boulder_phases:
-        if task not in BOULDER_PHASES:
-            raise ValueError(f"boulder_phases applies to {', '.join(BOULDER_PHASES)} only, "
-                             f"not {task!r}")
-        return BOULDER_PHASES[task]
+def phase_table(task: str) -> dict[int, Phase]:
+    """The curriculum phases of ``task`` (1 = the full task)."""
     if task not in TASK_PHASES:
         raise ValueError(f"curriculum phases exist only for task 'three-room', not {task!r}")
     return TASK_PHASES[task]
@@ -150,36 +89,16 @@ def _populate(env: MineRescueEnv, boulders, kit_room: int, miner_room: int) -> N
         agent, kit, miner = env.start_rooms(fixed=(0, kit_room, miner_room))
         phase = FULL_TASK
     else:
-        phase = phase_table(env.task, env.boulder_phases)[env.phase]
+        phase = phase_table(env.task)[env.phase]
         agent, kit, miner = phase.agent_room, kit_room, miner_room
         for boulder, door in list(zip(boulders, env.layout.doors))[:phase.boulders_aside]:
             env.move_aside(boulder, door)
-        if phase.holding_boulder:
-            env.carrying = boulders[phase.boulders_aside]
     env.place(MINER, miner)
     if phase.carrying_kit:
         env.carrying = env.add(Entity(KIT))
     else:
         env.place(KIT, kit)
-    _place_agent(env, agent, phase, boulders)
-
-
-def _place_agent(env: MineRescueEnv, room: int, phase: Phase, boulders) -> None:
-    """The agent in ``room``, where ``phase`` starts it: facing or near the kit or the next
-    blocked doorway's boulder, else anywhere."""
-    if phase.facing_kit:
-        env.place_agent_facing(room, env.kit, KIT_FACING_DISTANCE)
-    elif phase.facing_boulder:
-        env.place_agent_facing(room, boulders[phase.boulders_aside])
-    elif phase.near_kit:
-        env.place_agent_near(room, (env.kit.x, env.kit.z), *NEAR_BOULDER)
-    elif phase.near_boulder:
-        boulder = boulders[phase.boulders_aside]
-        env.place_agent_near(room, (boulder.x, boulder.z), *NEAR_BOULDER)
-    elif phase.near_doorway:    # the chain's doorway k leads from room k on to room k + 1
-        env.place_agent_near(room, env.layout.doors[room].center, *NEAR_BOULDER)
-    else:
-        env.place_agent(room)
+    env.place_agent(agent)
 
 
 def _rooms(env: MineRescueEnv) -> None:
@@ -229,10 +148,6 @@ class MineRescueEnv(MineEnv):
         placement: "fixed" or "any-room" (domain randomisation of the start rooms).
         phase: curriculum phase 1..6 of ``three-room`` (1 = the full task), or None; the other
             tasks have no phases (``two-room`` still accepts 1, its full task).
-        boulder_phases: ``three-room`` only: phases 1..23, the study's six with starts near
-            each blocked doorway, facing its boulder, holding it (anywhere in its room, near its
-            doorway, and in the next room), with it cleared (anywhere and near it), and near
-            and facing the kit inserted (see ``phase_table``).
         render_mode: None or "rgb_array" (first-person view and map side by side).
         randomise_visuals: draw the light level, the wall colour and the field of view anew each
             episode (visual domain randomisation; the layout of a seed does not change).
@@ -248,7 +163,7 @@ class MineRescueEnv(MineEnv):
                  room_size: float = 16.0, max_episode_steps: int | None = None,
                  placement: str = "fixed", phase: int | None = None,
                  render_mode: str | None = None, randomise_visuals: bool = False,
-                 boulder_phases: bool = False, room_colours: bool = False,
+                 room_colours: bool = False,
                  camera_pitch: float = 0.0, held_on_top: bool = False):
         if task not in TASKS:
             raise ValueError(f"unknown task {task!r}; choose one of {', '.join(TASKS)}")
@@ -269,10 +184,7 @@ class MineRescueEnv(MineEnv):
         if placement not in PLACEMENTS:
             raise ValueError(f"placement must be one of {', '.join(PLACEMENTS)}, got {placement!r}")
         self.placement = placement
-        if boulder_phases:
-            phase_table(task, True)   # raises for a task without them
-        self.boulder_phases = bool(boulder_phases)
-        self.phase = _check_phase(task, placement, phase, self.boulder_phases)
+        self.phase = _check_phase(task, placement, phase)
         super().__init__(max_episode_steps, room_size, render_mode, randomise_visuals,
                          room_colours, camera_pitch, held_on_top)
 
@@ -304,13 +216,13 @@ def _check_rooms(spec: Task, num_rooms) -> int:
     return int(num_rooms)
 
 
-def _check_phase(task: str, placement: str, phase, boulder_phases: bool) -> int | None:
+def _check_phase(task: str, placement: str, phase) -> int | None:
     if phase is None:
         return None
     # two-room's phase table is gone (the backward curriculum replaced it); its phase 1, the full
     # task, is still accepted as before
     if not (task == "two-room" and _is_int(phase) and phase == 1):
-        phases = phase_table(task, boulder_phases)   # raises for a task without phases
+        phases = phase_table(task)   # raises for a task without phases
         if not _is_int(phase) or phase not in phases:
             raise ValueError(f"phase must be an integer in 1..{len(phases)} or None for "
                              f"{task!r}, got {phase!r}")

@@ -199,7 +199,6 @@ class Actor(ActorBase):
                                bool(terminated), bool(truncated), next_q=next_q)
 
     def between_episodes(self, j: int) -> None:
-        self.curriculum.played(int(self.phases[j]), int(self.lengths[j]))
         self.pull_weights()   # actors pick up new weights between episodes
 
     # -- loop ----------------------------------------------------------------------------------

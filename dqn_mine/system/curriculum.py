@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dqn_mine.config import PHASED_CURRICULA, Config
+from dqn_mine.config import Config
 from dqn_mine.env.tasks import TASKS, phase_table
 from dqn_mine.metrics import LOW_EPSILON, Rolling
 
@@ -42,18 +42,13 @@ class Curriculum:
         the updates already made (the schedule's position)."""
         self.kind = cfg.curriculum
         self.threshold, self.review = cfg.curriculum_threshold, cfg.curriculum_review
-        self.review_by_steps = cfg.curriculum_review_unit == "steps"
         self.dr_share = cfg.curriculum_dr
-        # an actor's steps since the phase it last saw changed: all, and those of review episodes
-        self.seen_phase, self.played_steps, self.review_steps = None, 0, 0
-        # an actor's steps over its whole run: all, and those of domain-randomised episodes
-        self.all_steps, self.dr_steps = 0, 0
         self.rooms_schedule = tuple(cfg.rooms_schedule)
         self.total_updates = cfg.updates
-        self.phased = self.kind in PHASED_CURRICULA
+        self.phased = self.kind == "adaptive"
         self.backward = self.kind == "backward"
         self.step = cfg.backward_step
-        self.easiest = max(phase_table(cfg.task, self.kind == "boulders")) if self.phased else 0
+        self.easiest = max(phase_table(cfg.task)) if self.phased else 0
         # adaptive: the current phase (1 = the full task); 0 without phases
         self.phase = self._start_phase(phase)
         # schedule: the current room count; None without the schedule
@@ -160,8 +155,6 @@ class Curriculum:
         """(phase recorded with the episode, environment settings) for an episode that starts
         while the shared state says ``phase`` and ``num_rooms``."""
         if self.phased:
-            if phase != self.seen_phase:
-                self.seen_phase, self.played_steps, self.review_steps = phase, 0, 0
             if self.dr_share and self._randomises(rng):
                 return DR_PHASE, self.dr_settings()
             phase = self.review_phase(phase, rng)
@@ -169,22 +162,6 @@ class Curriculum:
         if self.kind == "schedule":
             return phase, {"num_rooms": num_rooms}
         return phase, {}
-
-    def played(self, phase: int, steps: int) -> None:
-        """An episode this actor started in ``phase`` ended after ``steps`` steps. Episodes of a
-        phase easier than the current one count as review (also those started before a switch:
-        they are what the replay gets from passed phases)."""
-        self.all_steps += steps
-        if self.backward:
-            self.played_steps += steps
-            self.review_steps += steps if phase == REVIEW else 0
-            return
-        if phase == DR_PHASE:
-            self.dr_steps += steps
-            return      # neither the current phase's nor a review: outside that count
-        self.played_steps += steps
-        if self.seen_phase is not None and phase > self.seen_phase:
-            self.review_steps += steps
 
     def phase_settings(self, phase: int) -> dict:
         """The environment settings of an episode that starts in ``phase``."""
@@ -201,28 +178,15 @@ class Curriculum:
         passed (uniformly), else ``phase``. Reviewed episodes keep the rewards of the skills the
         current phase builds on flowing into the replay after a switch; only episodes of the
         current phase count towards the next switch. No random number is drawn without review,
-        so the study's rule draws the same episodes as before review existed.
-
-        ``curriculum_review_unit`` "steps" makes ``review`` a share of the actor's steps, not of
-        its episodes: a passed phase's successful episode is short and a new phase's failing one
-        runs to the step limit (docs/three_room.md)."""
+        so the study's rule draws the same episodes as before review existed."""
         if phase >= self.easiest or self.review == 0 or not self._reviews(rng):
             return phase
         return int(rng.integers(phase + 1, self.easiest + 1))
 
     def _randomises(self, rng: np.random.Generator) -> bool:
-        """Whether the next episode is domain-randomised: a draw per episode, or while such
-        episodes have played less than ``curriculum_dr`` of all the actor's steps (no draw). A
-        randomised full task mostly runs to its 2,000-step limit, so on three-room 30% of the
-        episodes are a third of the steps while the phase's own episodes fail too, and about half
-        once they take 800 steps: by episodes, the share grows as the phase is learned."""
-        if self.review_by_steps:
-            return self.dr_steps < self.dr_share * self.all_steps
+        """Whether the next episode is domain-randomised (a draw per episode)."""
         return rng.random() < self.dr_share
 
     def _reviews(self, rng: np.random.Generator) -> bool:
-        """Whether the next episode reviews: a draw per episode, or while review episodes have
-        played less than ``review`` of the steps since the phase switch (no draw)."""
-        if self.review_by_steps:
-            return self.review_steps < self.review * self.played_steps
+        """Whether the next episode reviews (a draw per episode)."""
         return rng.random() < self.review

@@ -41,8 +41,6 @@ def env_kwargs(cfg: Config, **override) -> dict:
                   max_episode_steps=cfg.max_episode_steps, placement=cfg.placement)
     kwargs.update(override)
     kwargs.update(VIEWS[cfg.view])
-    if cfg.curriculum == "boulders":
-        kwargs["boulder_phases"] = True
     if kwargs["task"] == "rooms":  # the other tasks have a fixed room count
         kwargs.setdefault("num_rooms", cfg.num_rooms)
     return kwargs

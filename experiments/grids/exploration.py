@@ -9,11 +9,12 @@ CONFIGS = {
     "baseline": {},
     "curriculum": {"curriculum": "adaptive"},
     "any-room": {"placement": "any-room"},
-    # both: 30% of the episodes (of the steps at scale cpu, whose review counts steps) start as
-    # the full task in random rooms, the rest follow the phases (the rule counts only those)
+    # both: 30% of the episodes start as the full task in random rooms, the rest follow the
+    # phases (the rule counts only those)
     "curriculum+dr": {"curriculum": "adaptive", "curriculum_dr": 0.3},
 }
 NO_PHASES = {"curriculum": "none"}
+BACKWARD = {"curriculum": "backward"}
 CPU_MINUTES = {"baseline": 15, "curriculum": 90, "any-room": 35, "curriculum+dr": 35}
 BASE = {"task": "three-room", "eval_every": 10_000, "eval_episodes": 10}
 SCALES = {
@@ -24,19 +25,23 @@ SCALES = {
               "note": "reduced for 2 CPU cores: three-room of 8x8 rooms, 400-step episodes, "
                       "12,000 updates, 1 actor and the evaluation actor, one seed; the full "
                       "task is far out of reach at this budget, watch the curriculum phase"},
-    # The cpu-three-room preset for all four (its actors, learner, clear view, and its 23 phases
-    # for the curricula), so that they differ only in how episodes start; each for the minutes it
-    # needs to show its result (the baseline finds no reward in 90), all four within 3 hours.
-    "cpu": {"base": {"preset": "cpu-three-room", "task": "three-room", "eval_every": 500_000},
+    # The cpu-three-room preset for all four without its demonstrations (its actors, learner and
+    # clear view), so that they differ only in how episodes start: the study's six phases need
+    # far more updates than 2 cores give, so both curricula are the backward one (the expert's
+    # path), in fixed or random rooms. Each for the minutes it needs to show its result (the
+    # baseline finds no reward in 90).
+    "cpu": {"base": {"preset": "cpu-three-room", "task": "three-room", "demos": 0,
+                     "eval_every": 500_000},
             "override": {"baseline": {**NO_PHASES, "minutes": CPU_MINUTES["baseline"]},
-                         "curriculum": {"curriculum": "boulders",
-                                        "minutes": CPU_MINUTES["curriculum"]},
+                         "curriculum": {**BACKWARD, "minutes": CPU_MINUTES["curriculum"]},
                          "any-room": {**NO_PHASES, "minutes": CPU_MINUTES["any-room"]},
-                         "curriculum+dr": {"curriculum": "boulders",
+                         "curriculum+dr": {**BACKWARD, "placement": "any-room",
+                                           "curriculum_dr": 0.0,
                                            "minutes": CPU_MINUTES["curriculum+dr"]}},
             "seeds": 1,
             "note": "full-size three-room (16 x 16 rooms, 2,000 steps) on 2 CPU cores: the "
-                    "cpu-three-room preset, minutes a run "
+                    "cpu-three-room preset without demonstrations, the backward curriculum as "
+                    "the curriculum, minutes a run "
                     + ", ".join(f"{k} {v}" for k, v in CPU_MINUTES.items()) + ", one seed"},
     "smoke": {"base": {**SMOKE, "task": "three-room", "eval_every": 500, "eval_episodes": 1},
               "seeds": 1, "note": SMOKE_NOTE},
