@@ -368,7 +368,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 PRESETS["cpu-three-room"] = {**PRESETS["cpu"], "task": "three-room", "updates": 600_000,
                              "view": "clear", "unstick": 2}
-PRESETS["cpu-rooms"] = {**PRESETS["cpu-three-room"], "task": "rooms", "demos": 0}
+PRESETS["cpu-rooms"] = {**PRESETS["cpu-three-room"], "task": "rooms"}
 # What each is for, in a line or two (``--help`` lists them).
 PRESET_REASONS = {
     "paper": "the study's configuration on two-room (a scripted walker plays the pre-fill)",
@@ -378,7 +378,7 @@ PRESET_REASONS = {
            "in the replay, a replay ratio of 0.03",
     "cpu-three-room": "full three-room in 90 minutes on a few CPU cores: cpu's settings "
                       "with the clear view and two-frame loops unstuck",
-    "cpu-rooms": "the rooms task at any --num-rooms: cpu's settings with three-room's view",
+    "cpu-rooms": "the rooms task at any --num-rooms: cpu-three-room's settings",
 }
 
 
