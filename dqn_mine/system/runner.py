@@ -216,15 +216,12 @@ class Run:
     def plan_demos(self) -> DemoSet | None:
         """The run's demonstrations, planned before anything is allocated: a signal meanwhile
         stops the run at once, with nothing to clean up or save."""
-        if not (self.cfg.demos or self.cfg.demos_from):
-            return None
-
         def stop(signum, frame):
             raise NothingTrained(f"stopped by {signal.Signals(signum).name} while the expert "
                                  "planned the demonstrations; nothing was trained")
 
         old = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
-        if not self.progress and not self.cfg.demos_from:
+        if self.cfg.demos and not self.progress:    # none to plan without, or from a folder
             print("demos: planning the expert's episodes", file=sys.stderr, flush=True)
         try:
             return run_demos(self.cfg, self.progress)
